@@ -1,0 +1,17 @@
+//! firstshot: global illumination of glossy scenes on the GPU, after *Incoming First-Shot for
+//! Non-Diffuse Global Illumination* (Szirmay-Kalos, Sbert, Martínez, Tobler, SCCG 2000).
+//!
+//! The pipeline, in the order `render.rs` runs it:
+//! 1. `scene`: a TOML scene (+ OBJ meshes) is loaded and validated, then tessellated into
+//!    triangular patches and light samples.
+//! 2. `stages::first_shot_*`: item buffers around every light sample give one scalar r_ij per
+//!    visible (patch, light sample) pair; their reflection is evaluated on the fly.
+//! 3. `stages::bundle_*`: ray-bundle stochastic iteration transfers the remaining light along
+//!    random global directions between all mutually visible patches.
+//! 4. `stages::image_estimate`: every step adds an estimate of each camera pixel; the image is
+//!    the running mean, written by `image` as EXR + PNG.
+
+pub mod error;
+pub mod scene;
+
+pub use error::{Error, Result};

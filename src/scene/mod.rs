@@ -1,0 +1,117 @@
+//! Scenes: what `load` reads from a TOML file (format 1, SCENE_FORMAT.md) and what
+//! `tessellate` turns into patches and light samples.
+//!
+//! Geometry is kept in f64 on the host so that tessellation preserves areas to far better
+//! than the 1e-6 the contract asks; it becomes f32 only when it is uploaded.
+
+pub mod brdf;
+pub mod load;
+pub mod shapes;
+pub mod tessellate;
+
+use glam::DVec3;
+use std::path::PathBuf;
+
+pub use load::load;
+pub use tessellate::{tessellate, LightSample, Patch, PatchKind, Patches};
+
+/// Linear RGB, one value per channel.
+pub type Rgb = [f32; 3];
+
+/// A loaded, validated scene. Every value here has passed the checks of SCENE_FORMAT.md.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The scene file it came from (errors and stats name it).
+    pub source: PathBuf,
+    pub camera: Camera,
+    /// Radiance arriving from outside the scene (`[environment] radiance`).
+    pub environment: Rgb,
+    pub settings: Settings,
+    pub materials: Vec<Material>,
+    /// Every `[[shapes]]` entry, already turned into triangles in scene space.
+    pub surfaces: Vec<Surface>,
+    pub lights: Vec<Light>,
+}
+
+/// A pinhole camera (right-handed; image right = normalize(forward x up)).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    pub position: DVec3,
+    pub look_at: DVec3,
+    pub up: DVec3,
+    /// Full vertical field of view in degrees, 0 < fov_y < 180.
+    pub fov_y: f64,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// `[settings]`: defaults that command-line flags override.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    pub patch_size: f64,
+    pub hemicube_resolution: u32,
+    pub bundle_resolution: u32,
+    pub iterations: u32,
+    pub seed: u64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            patch_size: f64::INFINITY,
+            hemicube_resolution: 256,
+            bundle_resolution: 256,
+            iterations: 100,
+            seed: 1,
+        }
+    }
+}
+
+/// A named material (`[materials.NAME]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Material {
+    pub name: String,
+    pub kind: MaterialKind,
+}
+
+/// The two BRDFs of the format. `brdf.rs` evaluates them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MaterialKind {
+    /// Lambertian, f = albedo / pi.
+    Diffuse { albedo: Rgb },
+    /// max-Phong: f = kd / pi + ks max(0, cos psi)^n / max(cos theta_in, cos theta_out).
+    Phong { diffuse: Rgb, specular: Rgb, shininess: f32 },
+}
+
+/// One triangle of a shape, counter-clockwise seen from its front.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Triangle {
+    pub vertices: [DVec3; 3],
+    /// Index into `Scene::materials` (meshes may set it per face through `usemtl`).
+    pub material: u32,
+}
+
+/// A `[[shapes]]` entry after loading: its triangles in scene space.
+#[derive(Debug, Clone)]
+pub struct Surface {
+    /// Where it came from, for messages: `shapes[3] (mesh "meshes/bunny.obj")`.
+    pub origin: String,
+    pub triangles: Vec<Triangle>,
+    /// Diffuse emitted radiance on the front side (black when absent).
+    pub emission: Rgb,
+    /// Both sides reflect (and emit) with the same material.
+    pub two_sided: bool,
+}
+
+/// A `[[lights]]` entry: the sources that the first shot handles.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Light {
+    /// Isotropic point light; intensity = power / (4 pi).
+    Point { position: DVec3, power: Rgb },
+    /// One-sided diffuse planar convex quad, meshed into `subdivisions` x `subdivisions` cells.
+    Area {
+        vertices: [DVec3; 4],
+        radiance: Rgb,
+        subdivisions: u32,
+    },
+}

@@ -1,0 +1,1 @@
+//! Shapes -> triangles: quad, triangle, box, sierpinski, OBJ mesh, and their transforms.
