@@ -39,7 +39,11 @@ pub enum Error {
 
 impl Error {
     /// Shorthand for a scene error.
-    pub fn scene(file: impl Into<PathBuf>, key: impl Into<String>, message: impl Into<String>) -> Self {
+    pub fn scene(
+        file: impl Into<PathBuf>,
+        key: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
         Error::Scene {
             file: file.into(),
             key: key.into(),
@@ -49,7 +53,10 @@ impl Error {
 
     /// Whether this error is the user's to fix before any work starts (exit status 2).
     pub fn is_usage(&self) -> bool {
-        matches!(self, Error::Scene { .. } | Error::Usage(_) | Error::Limits(_))
+        matches!(
+            self,
+            Error::Scene { .. } | Error::Usage(_) | Error::Limits(_)
+        )
     }
 }
 

@@ -15,3 +15,9 @@ pub mod error;
 pub mod scene;
 
 pub use error::{Error, Result};
+pub mod gpu;
+pub mod image;
+pub mod layout;
+pub mod render;
+pub mod rng;
+pub mod stages;

@@ -13,7 +13,7 @@ use glam::DVec3;
 use std::path::PathBuf;
 
 pub use load::load;
-pub use tessellate::{tessellate, LightSample, Patch, PatchKind, Patches};
+pub use tessellate::{LightSample, Patch, PatchKind, Patches, tessellate};
 
 /// Linear RGB, one value per channel.
 pub type Rgb = [f32; 3];
@@ -80,7 +80,11 @@ pub enum MaterialKind {
     /// Lambertian, f = albedo / pi.
     Diffuse { albedo: Rgb },
     /// max-Phong: f = kd / pi + ks max(0, cos psi)^n / max(cos theta_in, cos theta_out).
-    Phong { diffuse: Rgb, specular: Rgb, shininess: f32 },
+    Phong {
+        diffuse: Rgb,
+        specular: Rgb,
+        shininess: f32,
+    },
 }
 
 /// One triangle of a shape, counter-clockwise seen from its front.

@@ -1,0 +1,188 @@
+//! Adapter choice and device creation, kept apart from the work: library functions take a
+//! `&Context`; only `main.rs` and tests make one.
+
+use crate::{Error, Result};
+use serde::Serialize;
+use std::fmt;
+
+/// What `--adapter` asks for.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum AdapterChoice {
+    /// Discrete GPU, then integrated, then virtual, then a CPU adapter; Vulkan first.
+    Auto,
+    /// A software (CPU) adapter such as lavapipe or llvmpipe.
+    Cpu,
+    /// Any hardware adapter (discrete, integrated or virtual).
+    Gpu,
+    /// The first adapter (in `Auto` order) whose name contains this, case-insensitively.
+    Name(String),
+}
+
+impl std::str::FromStr for AdapterChoice {
+    type Err = std::convert::Infallible;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        Ok(match s.to_ascii_lowercase().as_str() {
+            "auto" => AdapterChoice::Auto,
+            "cpu" => AdapterChoice::Cpu,
+            "gpu" => AdapterChoice::Gpu,
+            _ => AdapterChoice::Name(s.to_string()),
+        })
+    }
+}
+
+/// An adapter as `--list-adapters` and `--stats` report it.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct AdapterSummary {
+    pub name: String,
+    pub backend: String,
+    pub device_type: String,
+    pub driver: String,
+}
+
+impl AdapterSummary {
+    fn of(info: &wgpu::AdapterInfo) -> Self {
+        AdapterSummary {
+            name: info.name.clone(),
+            backend: format!("{:?}", info.backend),
+            device_type: match info.device_type {
+                wgpu::DeviceType::DiscreteGpu => "DiscreteGpu",
+                wgpu::DeviceType::IntegratedGpu => "IntegratedGpu",
+                wgpu::DeviceType::VirtualGpu => "VirtualGpu",
+                wgpu::DeviceType::Cpu => "Cpu",
+                wgpu::DeviceType::Other => "Other",
+            }
+            .to_string(),
+            driver: format!("{} {}", info.driver, info.driver_info)
+                .trim()
+                .to_string(),
+        }
+    }
+}
+
+impl fmt::Display for AdapterSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} ({}, {})", self.name, self.backend, self.device_type)
+    }
+}
+
+/// A device and its queue on the chosen adapter.
+pub struct Context {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub summary: AdapterSummary,
+}
+
+fn instance() -> wgpu::Instance {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::all();
+    // Validation layers are for development; they slow lavapipe down a lot.
+    desc.flags = wgpu::InstanceFlags::empty();
+    wgpu::Instance::new(desc)
+}
+
+/// Lower is preferred: hardware before software, Vulkan before the other backends.
+fn preference(info: &wgpu::AdapterInfo) -> (u8, u8) {
+    let kind = match info.device_type {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Cpu => 3,
+        wgpu::DeviceType::Other => 4,
+    };
+    let backend = match info.backend {
+        wgpu::Backend::Vulkan => 0,
+        wgpu::Backend::Metal => 1,
+        wgpu::Backend::Dx12 => 2,
+        wgpu::Backend::Gl => 3,
+        _ => 4,
+    };
+    (kind, backend)
+}
+
+/// Every adapter wgpu finds, in the order `auto` prefers them.
+pub fn list_adapters() -> Vec<AdapterSummary> {
+    sorted_adapters(&instance())
+        .iter()
+        .map(|a| AdapterSummary::of(&a.get_info()))
+        .collect()
+}
+
+fn sorted_adapters(instance: &wgpu::Instance) -> Vec<wgpu::Adapter> {
+    let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    adapters.sort_by_key(|a| preference(&a.get_info()));
+    adapters
+}
+
+fn matches(choice: &AdapterChoice, info: &wgpu::AdapterInfo) -> bool {
+    match choice {
+        AdapterChoice::Auto => true,
+        AdapterChoice::Cpu => info.device_type == wgpu::DeviceType::Cpu,
+        AdapterChoice::Gpu => matches!(
+            info.device_type,
+            wgpu::DeviceType::DiscreteGpu
+                | wgpu::DeviceType::IntegratedGpu
+                | wgpu::DeviceType::VirtualGpu
+        ),
+        AdapterChoice::Name(part) => info.name.to_lowercase().contains(&part.to_lowercase()),
+    }
+}
+
+impl Context {
+    /// Opens a device on the first adapter that fits `choice`, with the adapter's own limits
+    /// (large scenes need them) and no optional features: the portable path needs none.
+    pub fn new(choice: &AdapterChoice) -> Result<Context> {
+        let instance = instance();
+        let adapters = sorted_adapters(&instance);
+        let found: Vec<String> = adapters
+            .iter()
+            .map(|a| AdapterSummary::of(&a.get_info()).to_string())
+            .collect();
+        let mut failures = Vec::new();
+        for adapter in adapters
+            .into_iter()
+            .filter(|a| matches(choice, &a.get_info()))
+        {
+            let summary = AdapterSummary::of(&adapter.get_info());
+            let desc = wgpu::DeviceDescriptor {
+                label: Some("firstshot.device"),
+                required_features: wgpu::Features::empty(),
+                required_limits: adapter.limits(),
+                ..Default::default()
+            };
+            match pollster::block_on(adapter.request_device(&desc)) {
+                Ok((device, queue)) => {
+                    return Ok(Context {
+                        adapter,
+                        device,
+                        queue,
+                        summary,
+                    });
+                }
+                Err(e) => failures.push(format!("{summary}: {e}")),
+            }
+        }
+        let found = if found.is_empty() {
+            "none (install a Vulkan driver, e.g. Debian's mesa-vulkan-drivers, or an OpenGL/EGL driver)".to_string()
+        } else {
+            found.join("; ")
+        };
+        let mut message = format!("no adapter fits --adapter {choice:?}; found: {found}");
+        if !failures.is_empty() {
+            message.push_str(&format!("; could not open: {}", failures.join("; ")));
+        }
+        Err(Error::Adapter(message))
+    }
+
+    pub fn limits(&self) -> wgpu::Limits {
+        self.device.limits()
+    }
+
+    /// Waits for all submitted work; a lost device or a timeout becomes an error.
+    pub fn wait(&self) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))
+    }
+}

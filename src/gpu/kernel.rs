@@ -1,0 +1,80 @@
+//! WGSL sources: every kernel is one file in `wgsl/`, compiled with the generated constant
+//! header and the shared files of `wgsl/common/` in front of it.
+
+use crate::layout;
+
+/// Shared WGSL, prepended to every kernel in this order.
+const COMMON: &[(&str, &str)] = &[
+    (
+        "common/layout.wgsl",
+        include_str!("../../wgsl/common/layout.wgsl"),
+    ),
+    (
+        "common/brdf.wgsl",
+        include_str!("../../wgsl/common/brdf.wgsl"),
+    ),
+];
+
+/// Every kernel of the pipeline, by stem (`wgsl/<stem>.wgsl`, `src/stages/<stem>.rs`).
+pub const KERNELS: &[(&str, &str)] = &[
+    (
+        "camera_item_buffer",
+        include_str!("../../wgsl/camera_item_buffer.wgsl"),
+    ),
+    (
+        "image_estimate",
+        include_str!("../../wgsl/image_estimate.wgsl"),
+    ),
+    ("brdf_probe", include_str!("../../wgsl/brdf_probe.wgsl")),
+];
+
+/// The full source of one kernel: generated header, common files, the kernel itself.
+pub fn source(stem: &str) -> String {
+    let body = KERNELS
+        .iter()
+        .find(|(s, _)| *s == stem)
+        .map(|(_, src)| *src)
+        .unwrap_or_else(|| panic!("no kernel named {stem} in gpu::kernel::KERNELS"));
+    let mut out = String::from("// generated from src/layout.rs\n");
+    out.push_str(&layout::wgsl_constants());
+    for (name, src) in COMMON {
+        out.push_str(&format!("\n// ---- {name}\n"));
+        out.push_str(src);
+    }
+    out.push_str(&format!("\n// ---- {stem}.wgsl\n"));
+    out.push_str(body);
+    out
+}
+
+/// Compiles a kernel into a shader module labelled `firstshot.<stem>`.
+pub fn module(device: &wgpu::Device, stem: &str) -> wgpu::ShaderModule {
+    device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(&format!("firstshot.{stem}")),
+        source: wgpu::ShaderSource::Wgsl(source(stem).into()),
+    })
+}
+
+/// Parses and validates a kernel with naga, as the unit tests do for every kernel.
+pub fn validate(stem: &str) -> std::result::Result<naga::Module, String> {
+    let src = source(stem);
+    let module = naga::front::wgsl::parse_str(&src).map_err(|e| e.emit_to_string(&src))?;
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    )
+    .validate(&module)
+    .map_err(|e| e.emit_to_string(&src))?;
+    Ok(module)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn every_kernel_parses_and_validates() {
+        for (stem, _) in super::KERNELS {
+            if let Err(e) = super::validate(stem) {
+                panic!("wgsl/{stem}.wgsl does not validate:\n{e}");
+            }
+        }
+    }
+}

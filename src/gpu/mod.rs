@@ -1,0 +1,9 @@
+//! The GPU host: adapters and devices (`context`), WGSL kernels (`kernel`), and small buffer
+//! helpers (`buffers`). Stages in `crate::stages` build on these.
+
+pub mod buffers;
+pub mod context;
+pub mod kernel;
+pub mod scene_buffers;
+
+pub use context::{AdapterChoice, AdapterSummary, Context};

@@ -1,0 +1,210 @@
+//! The scene on the GPU: patches, materials, light samples, the triangles to rasterise and
+//! the per-patch iteration state. Built once per render; stages bind what they need.
+
+use super::buffers;
+use crate::layout::*;
+use crate::scene::{MaterialKind, PatchKind, Patches, Scene};
+use glam::DVec3;
+
+/// GPU copies of the tessellated scene.
+pub struct SceneBuffers {
+    pub patch_count: u32,
+    pub patches: wgpu::Buffer,
+    pub materials: wgpu::Buffer,
+    pub samples: wgpu::Buffer,
+    pub sample_count: u32,
+    /// Three `RasterVertex` per patch, in patch order.
+    pub vertices: wgpu::Buffer,
+    /// `GpuPatchState` per patch (J_j, win_j).
+    pub state: wgpu::Buffer,
+    /// The first-shot factors r_ij, sparse by patch (empty until the first shot ran).
+    pub first_shot: FirstShotTable,
+    /// Bounding sphere of all geometry and light samples.
+    pub centre: DVec3,
+    pub radius: f64,
+}
+
+/// The material table as the GPU sees it; the last entry is black (area-light patches).
+pub fn gpu_materials(scene: &Scene) -> Vec<GpuMaterial> {
+    let mut out: Vec<GpuMaterial> = scene
+        .materials
+        .iter()
+        .map(|m| match m.kind {
+            MaterialKind::Diffuse { albedo } => GpuMaterial {
+                diffuse: [albedo[0], albedo[1], albedo[2], 0.0],
+                specular: [0.0; 4],
+            },
+            MaterialKind::Phong {
+                diffuse,
+                specular,
+                shininess,
+            } => GpuMaterial {
+                diffuse: [diffuse[0], diffuse[1], diffuse[2], 0.0],
+                specular: [specular[0], specular[1], specular[2], shininess],
+            },
+        })
+        .collect();
+    out.push(GpuMaterial::zeroed());
+    out
+}
+
+fn v4(v: DVec3, w: f64) -> [f32; 4] {
+    [v.x as f32, v.y as f32, v.z as f32, w as f32]
+}
+
+/// The patch table. `first_shot`: whether area lights are first-shot lights (their emission
+/// is then left out of the iteration) or plain emitters.
+pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<GpuPatch> {
+    let black = scene.materials.len() as u32;
+    patches
+        .patches
+        .iter()
+        .map(|p| {
+            let mut flags = 0;
+            if p.twin {
+                flags |= PATCH_TWIN;
+            }
+            if first_shot && matches!(p.kind, PatchKind::AreaLight { .. }) {
+                flags |= PATCH_FIRST_SHOT_LIGHT;
+            }
+            GpuPatch {
+                v0: v4(p.vertices[0], p.area),
+                v1: v4(p.vertices[1], 0.0),
+                v2: v4(p.vertices[2], 0.0),
+                normal: v4(p.normal, p.normal.dot(p.vertices[0])),
+                emission: [p.emission[0], p.emission[1], p.emission[2], 0.0],
+                material: p.material.unwrap_or(black),
+                flags,
+                _pad: [0; 2],
+            }
+        })
+        .collect()
+}
+
+/// Three vertices per patch with the patch id (and twin bit) for the rasterising stages.
+pub fn raster_vertices(patches: &Patches) -> Vec<RasterVertex> {
+    let mut out = Vec::with_capacity(patches.patches.len() * 3);
+    for (i, p) in patches.patches.iter().enumerate() {
+        let id = i as u32 | if p.twin { VERTEX_TWIN_BIT } else { 0 };
+        for v in p.vertices {
+            out.push(RasterVertex {
+                position: [v.x as f32, v.y as f32, v.z as f32],
+                patch: id,
+            });
+        }
+    }
+    out
+}
+
+/// The light-sample table.
+pub fn gpu_samples(patches: &Patches) -> Vec<GpuLightSample> {
+    patches
+        .samples
+        .iter()
+        .map(|s| GpuLightSample {
+            position: v4(s.position, if s.normal.is_some() { 1.0 } else { 0.0 }),
+            normal: v4(s.normal.unwrap_or(DVec3::ZERO), s.weight),
+            strength: [s.strength[0], s.strength[1], s.strength[2], 0.0],
+        })
+        .collect()
+}
+
+/// Bounding sphere (centre of the bounding box) of the patches and light samples.
+pub fn bounding_sphere(patches: &Patches) -> (DVec3, f64) {
+    let points = patches
+        .patches
+        .iter()
+        .flat_map(|p| p.vertices)
+        .chain(patches.samples.iter().map(|s| s.position));
+    let (lo, hi) = points.fold(
+        (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)),
+        |(lo, hi), v| (lo.min(v), hi.max(v)),
+    );
+    if lo.x > hi.x {
+        return (DVec3::ZERO, 1.0);
+    }
+    let centre = (lo + hi) * 0.5;
+    let radius = patches
+        .patches
+        .iter()
+        .flat_map(|p| p.vertices)
+        .chain(patches.samples.iter().map(|s| s.position))
+        .map(|v| v.distance(centre))
+        .fold(0.0, f64::max);
+    (centre, radius.max(1e-9))
+}
+
+impl SceneBuffers {
+    pub fn new(
+        device: &wgpu::Device,
+        scene: &Scene,
+        patches: &Patches,
+        first_shot: bool,
+    ) -> SceneBuffers {
+        let gpu = gpu_patches(scene, patches, first_shot);
+        let samples = gpu_samples(patches);
+        let (centre, radius) = bounding_sphere(patches);
+        let none = wgpu::BufferUsages::empty();
+        SceneBuffers {
+            patch_count: gpu.len() as u32,
+            patches: buffers::storage_init(device, "firstshot.scene.patches", &gpu, none),
+            materials: buffers::storage_init(
+                device,
+                "firstshot.scene.materials",
+                &gpu_materials(scene),
+                none,
+            ),
+            samples: buffers::storage_init(device, "firstshot.scene.light_samples", &samples, none),
+            sample_count: samples.len() as u32,
+            vertices: buffers::storage_init(
+                device,
+                "firstshot.scene.vertices",
+                &raster_vertices(patches),
+                wgpu::BufferUsages::VERTEX,
+            ),
+            state: buffers::storage_zeroed(
+                device,
+                "firstshot.scene.patch_state",
+                (gpu.len() * std::mem::size_of::<GpuPatchState>()) as u64,
+                wgpu::BufferUsages::COPY_SRC,
+            ),
+            first_shot: FirstShotTable::empty(device, gpu.len() as u32),
+            centre,
+            radius,
+        }
+    }
+}
+
+use bytemuck::Zeroable;
+
+/// The first-shot factors in compressed-row form: the entries of patch j are
+/// `entries[offsets[j]..offsets[j + 1]]`, each (light sample index, bits of r_ij as f32),
+/// in ascending sample order.
+pub struct FirstShotTable {
+    /// patch_count + 1 u32.
+    pub offsets: wgpu::Buffer,
+    /// vec2<u32> per stored pair.
+    pub entries: wgpu::Buffer,
+    pub entry_count: u32,
+}
+
+impl FirstShotTable {
+    /// No light pairs: every patch's row is empty.
+    pub fn empty(device: &wgpu::Device, patch_count: u32) -> Self {
+        FirstShotTable {
+            offsets: buffers::storage_zeroed(
+                device,
+                "firstshot.first_shot.offsets",
+                4 * (patch_count as u64 + 1),
+                wgpu::BufferUsages::COPY_SRC,
+            ),
+            entries: buffers::storage_zeroed(
+                device,
+                "firstshot.first_shot.entries",
+                16,
+                wgpu::BufferUsages::COPY_SRC,
+            ),
+            entry_count: 0,
+        }
+    }
+}

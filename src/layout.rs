@@ -1,0 +1,160 @@
+//! Every struct shared with WGSL, written once here and once in `wgsl/common/layout.wgsl`
+//! (same names, same field order). `tests/layout_sync.rs` compares naga's offsets and sizes
+//! with `offset_of!` and `size_of`, so the two copies cannot drift apart silently.
+//!
+//! Rules: `#[repr(C)]`, Pod, fields of u32 / f32 / 16-byte vectors, size a multiple of 16.
+
+use bytemuck::{Pod, Zeroable};
+
+/// Bits of `Patch::flags` (reach WGSL through the generated header, see `gpu::kernel`).
+pub const PATCH_TWIN: u32 = 1;
+/// The patch belongs to a first-shot light: its emission is seen by the camera but left out
+/// of the iteration, where its first reflection replaces it (paper eq. 11).
+pub const PATCH_FIRST_SHOT_LIGHT: u32 = 2;
+/// Item buffers store patch index + 1; this value means "no surface".
+pub const NO_PATCH: u32 = 0;
+/// Camera and cube item buffers pack the twin bit into the top bit of the vertex's patch id.
+pub const VERTEX_TWIN_BIT: u32 = 1 << 31;
+/// The most patches a scene may have (ids must leave the twin bit free).
+pub const MAX_PATCHES: u32 = 1 << 27;
+
+/// One triangular patch. WGSL: `Patch`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuPatch {
+    /// xyz: vertex 0; w: area A_j.
+    pub v0: [f32; 4],
+    /// xyz: vertex 1.
+    pub v1: [f32; 4],
+    /// xyz: vertex 2.
+    pub v2: [f32; 4],
+    /// xyz: unit front normal; w: plane offset dot(n, v0).
+    pub normal: [f32; 4],
+    /// rgb: emitted radiance on the front side.
+    pub emission: [f32; 4],
+    /// Index into the material table (black for area-light patches).
+    pub material: u32,
+    /// `PATCH_*` bits.
+    pub flags: u32,
+    pub _pad: [u32; 2],
+}
+
+/// A material in the unified max-Phong form (diffuse = Phong with ks = 0). WGSL: `Material`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuMaterial {
+    /// rgb: kd (the diffuse albedo).
+    pub diffuse: [f32; 4],
+    /// rgb: ks; w: shininess n.
+    pub specular: [f32; 4],
+}
+
+/// One light sample y_i of the first shot. WGSL: `LightSample`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuLightSample {
+    /// xyz: y_i; w: 0 for a point light, 1 for an area-light vertex.
+    pub position: [f32; 4],
+    /// xyz: the area light's normal n_L; w: trapezoid weight w_i.
+    pub normal: [f32; 4],
+    /// rgb: S_i (power of a point light, radiance of an area light).
+    pub strength: [f32; 4],
+}
+
+/// Iteration state of one patch (DESIGN.md 2): J_j and the direction win_j it travelled.
+/// WGSL: `PatchState`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuPatchState {
+    /// rgb: J_j.
+    pub incoming: [f32; 4],
+    /// xyz: win_j, the direction of travel of that light (unit); zero before step 1.
+    pub direction: [f32; 4],
+}
+
+/// A pinhole camera with the sub-pixel position of this pass's sample. WGSL: `Camera`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuCamera {
+    /// xyz: eye position.
+    pub eye: [f32; 4],
+    /// xyz: unit image right; w: tan(fov_x / 2).
+    pub right: [f32; 4],
+    /// xyz: unit image up; w: tan(fov_y / 2).
+    pub up: [f32; 4],
+    /// xyz: unit view direction; w: near distance of the reversed-z projection.
+    pub forward: [f32; 4],
+    /// xy: sample position inside the pixel, each in [0, 1); zw: unused.
+    pub jitter: [f32; 4],
+    /// x: width, y: height in pixels.
+    pub size: [u32; 4],
+}
+
+/// Per-pass parameters of the image estimate. WGSL: `EstimateParams`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuEstimateParams {
+    /// rgb: environment radiance seen where no surface is.
+    pub environment: [f32; 4],
+    /// Number of patches (ids at or above are invalid).
+    pub patch_count: u32,
+    /// 1 when the iteration state holds J (after step 1), 0 before.
+    pub use_state: u32,
+    pub _pad: [u32; 2],
+}
+
+/// A vertex of the rasterised patch triangles: position and patch id (with
+/// `VERTEX_TWIN_BIT`). Only a vertex buffer, so it has no WGSL struct.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct RasterVertex {
+    pub position: [f32; 3],
+    pub patch: u32,
+}
+
+macro_rules! assert_size_multiple_of_16 {
+    ($($t:ty),*) => { $(const _: () = assert!(std::mem::size_of::<$t>() % 16 == 0);)* };
+}
+assert_size_multiple_of_16!(
+    GpuPatch,
+    GpuMaterial,
+    GpuLightSample,
+    GpuPatchState,
+    GpuCamera,
+    GpuEstimateParams,
+    RasterVertex
+);
+
+/// One shared struct as the sync test sees it: (WGSL name, size, [(field, offset)]).
+pub type StructLayout = (&'static str, usize, Vec<(&'static str, usize)>);
+
+macro_rules! layout {
+    ($t:ty => $wgsl:literal { $($f:ident),* $(,)? }) => {
+        ($wgsl, std::mem::size_of::<$t>(), vec![$((stringify!($f), std::mem::offset_of!($t, $f))),*])
+    };
+}
+
+/// The layouts of every struct mirrored in `wgsl/common/layout.wgsl` (padding excluded).
+pub fn shared_layouts() -> Vec<StructLayout> {
+    vec![
+        layout!(GpuPatch => "Patch" { v0, v1, v2, normal, emission, material, flags }),
+        layout!(GpuMaterial => "Material" { diffuse, specular }),
+        layout!(GpuLightSample => "LightSample" { position, normal, strength }),
+        layout!(GpuPatchState => "PatchState" { incoming, direction }),
+        layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),
+        layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, use_state }),
+    ]
+}
+
+/// Constants that WGSL needs, emitted as a header in front of every kernel so that they
+/// are written once (here).
+pub fn wgsl_constants() -> String {
+    format!(
+        "const PATCH_TWIN: u32 = {PATCH_TWIN}u;\n\
+         const PATCH_FIRST_SHOT_LIGHT: u32 = {PATCH_FIRST_SHOT_LIGHT}u;\n\
+         const NO_PATCH: u32 = {NO_PATCH}u;\n\
+         const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
+         const PI: f32 = {pi:?};\n",
+        pi = std::f32::consts::PI
+    )
+}

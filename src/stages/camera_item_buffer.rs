@@ -1,0 +1,196 @@
+//! Camera item buffer (`wgsl/camera_item_buffer.wgsl`): patch id + 1 per camera pixel.
+
+use crate::gpu::{buffers, kernel};
+use crate::layout::{GpuCamera, RasterVertex};
+use crate::scene::Camera;
+
+pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// The uniform for `camera`, with the sample at `jitter` inside each pixel. `near` bounds
+/// the reversed-z projection; with a 32-bit float depth it costs no precision further away.
+pub fn gpu_camera(
+    camera: &Camera,
+    width: u32,
+    height: u32,
+    near: f64,
+    jitter: [f32; 2],
+) -> GpuCamera {
+    let forward = (camera.look_at - camera.position).normalize();
+    let right = forward.cross(camera.up).normalize();
+    let up = right.cross(forward);
+    let tan_y = (camera.fov_y.to_radians() * 0.5).tan();
+    let tan_x = tan_y * width as f64 / height as f64;
+    let f = |v: glam::DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
+    GpuCamera {
+        eye: f(camera.position, 1.0),
+        right: f(right, tan_x),
+        up: f(up, tan_y),
+        forward: f(forward, near),
+        jitter: [jitter[0], jitter[1], 0.0, 0.0],
+        size: [width, height, 0, 0],
+    }
+}
+
+/// Pipeline and targets of the camera item buffer.
+pub struct CameraItemBuffer {
+    pipeline: wgpu::RenderPipeline,
+    bind_group: wgpu::BindGroup,
+    pub camera: wgpu::Buffer,
+    pub ids: wgpu::Texture,
+    pub ids_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl CameraItemBuffer {
+    pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
+        let module = kernel::module(device, "camera_item_buffer");
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("firstshot.camera_item_buffer.layout"),
+            entries: &[buffers::uniform_entry::<GpuCamera>(
+                0,
+                wgpu::ShaderStages::VERTEX,
+            )],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("firstshot.camera_item_buffer.pipeline_layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("firstshot.camera_item_buffer.pipeline"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(raster_vertex_layout())],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                front_face: wgpu::FrontFace::Ccw,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: ID_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let camera = buffers::uniform(
+            device,
+            "firstshot.camera_item_buffer.camera",
+            &<GpuCamera as bytemuck::Zeroable>::zeroed(),
+        );
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("firstshot.camera_item_buffer.bind_group"),
+            layout: &layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: camera.as_entire_binding(),
+            }],
+        });
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        let ids = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("firstshot.camera_item_buffer.ids"),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: ID_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let depth = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("firstshot.camera_item_buffer.depth"),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        });
+        CameraItemBuffer {
+            pipeline,
+            bind_group,
+            camera,
+            ids_view: ids.create_view(&Default::default()),
+            ids,
+            depth_view: depth.create_view(&Default::default()),
+            width,
+            height,
+        }
+    }
+
+    /// Records the pass: every patch rasterised with its id.
+    pub fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        vertices: &wgpu::Buffer,
+        patch_count: u32,
+    ) {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("firstshot.camera_item_buffer.pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.ids_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(0.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_vertex_buffer(0, vertices.slice(..));
+        pass.draw(0..patch_count * 3, 0..1);
+    }
+}
+
+/// The vertex layout of `RasterVertex`, shared by every rasterising stage.
+pub fn raster_vertex_layout() -> wgpu::VertexBufferLayout<'static> {
+    const ATTRIBUTES: [wgpu::VertexAttribute; 2] =
+        wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32];
+    wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<RasterVertex>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &ATTRIBUTES,
+    }
+}

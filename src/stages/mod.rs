@@ -1,0 +1,6 @@
+//! One host module per WGSL kernel (`wgsl/<stem>.wgsl`): each owns its pipeline, buffers and
+//! bind groups, and records into an encoder it is given; none submits or waits.
+
+pub mod brdf_probe;
+pub mod camera_item_buffer;
+pub mod image_estimate;

@@ -1,0 +1,41 @@
+// Camera item buffer: which patch each camera pixel sees (DESIGN.md 4), for this pass's
+// sub-pixel sample position.
+//
+// Render pass. Vertex input: RasterVertex (location 0 position, location 1 patch id with
+// VERTEX_TWIN_BIT). Bindings: group 0 binding 0 `camera` (uniform Camera, read).
+// Target: R32Uint patch index + 1 (NO_PATCH where nothing), Depth32Float reversed-z
+// (greater is nearer, cleared to 0). No culling: a back face is black but still occludes.
+// Invariant: the sample point (pixel + camera.jitter) lands on the rasteriser's pixel
+// centre, so `image_estimate` can rebuild the exact ray of every pixel.
+// Host: src/stages/camera_item_buffer.rs.
+
+@group(0) @binding(0) var<uniform> camera: Camera;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) @interpolate(flat) patch_id: u32,
+}
+
+@vertex
+fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32) -> VertexOut {
+    let rel = position - camera.eye.xyz;
+    let x = dot(rel, camera.right.xyz);
+    let y = dot(rel, camera.up.xyz);
+    let z = dot(rel, camera.forward.xyz);
+    let size = vec2<f32>(camera.size.xy);
+    // Shift so that the sample point inside the pixel maps to the pixel's centre.
+    let shift = vec2<f32>(2.0 * (0.5 - camera.jitter.x) / size.x, -2.0 * (0.5 - camera.jitter.y) / size.y);
+    var out: VertexOut;
+    out.clip = vec4<f32>(x / camera.right.w + shift.x * z, y / camera.up.w + shift.y * z, camera.forward.w, z);
+    out.patch_id = patch_id;
+    return out;
+}
+
+@fragment
+fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) u32 {
+    // Of two back-to-back twins at the same depth only the one facing the camera counts.
+    if (!front && (in.patch_id & VERTEX_TWIN_BIT) != 0u) {
+        discard;
+    }
+    return (in.patch_id & ~VERTEX_TWIN_BIT) + 1u;
+}

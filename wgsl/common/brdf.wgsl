@@ -1,0 +1,25 @@
+// The max-Phong BRDF of SCENE_FORMAT.md, the WGSL twin of `src/scene/brdf.rs`
+// (`tests/brdf_gpu.rs` compares the two on the GPU to 1e-5).
+// Directions point away from the surface: w_in toward the light, w_out toward the viewer.
+
+fn brdf(m: Material, n: vec3<f32>, w_in: vec3<f32>, w_out: vec3<f32>) -> vec3<f32> {
+    let cos_in = dot(n, w_in);
+    let cos_out = dot(n, w_out);
+    if (cos_in <= 0.0 || cos_out <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    var f = m.diffuse.rgb / PI;
+    let ks = m.specular.rgb;
+    if (any(ks > vec3<f32>(0.0))) {
+        let shininess = m.specular.w;
+        let mirror = 2.0 * cos_in * n - w_in;
+        let cos_psi = dot(mirror, w_out);
+        // max(0, cos psi)^n with 0^0 = 1, as Rust's powf gives.
+        var lobe = select(0.0, 1.0, shininess == 0.0);
+        if (cos_psi > 0.0) {
+            lobe = pow(cos_psi, shininess);
+        }
+        f += ks * lobe / max(cos_in, cos_out);
+    }
+    return f;
+}

@@ -1,0 +1,57 @@
+// Structs shared with the Rust host, mirrored field for field from `src/layout.rs`
+// (`tests/layout_sync.rs` compares the offsets). Constants come from the generated header.
+
+// One triangular patch (Rust: GpuPatch).
+struct Patch {
+    v0: vec4<f32>,       // xyz vertex 0, w area
+    v1: vec4<f32>,
+    v2: vec4<f32>,
+    normal: vec4<f32>,   // xyz unit front normal, w dot(n, v0)
+    emission: vec4<f32>, // rgb emitted radiance on the front
+    material: u32,
+    flags: u32,          // PATCH_* bits
+    _pad0: u32,
+    _pad1: u32,
+}
+
+// Unified max-Phong material (Rust: GpuMaterial).
+struct Material {
+    diffuse: vec4<f32>,  // rgb kd
+    specular: vec4<f32>, // rgb ks, w shininess
+}
+
+// A first-shot light sample (Rust: GpuLightSample).
+struct LightSample {
+    position: vec4<f32>, // xyz y_i, w 0 point / 1 area vertex
+    normal: vec4<f32>,   // xyz n_L, w trapezoid weight
+    strength: vec4<f32>, // rgb S_i
+}
+
+// Iteration state of a patch (Rust: GpuPatchState).
+struct PatchState {
+    incoming: vec4<f32>,  // rgb J_j
+    direction: vec4<f32>, // xyz win_j
+}
+
+// Pinhole camera with this pass's sub-pixel sample (Rust: GpuCamera).
+struct Camera {
+    eye: vec4<f32>,
+    right: vec4<f32>,    // w tan(fov_x / 2)
+    up: vec4<f32>,       // w tan(fov_y / 2)
+    forward: vec4<f32>,  // w near distance
+    jitter: vec4<f32>,   // xy in [0, 1)
+    size: vec4<u32>,     // x width, y height
+}
+
+// Image estimate parameters (Rust: GpuEstimateParams).
+struct EstimateParams {
+    environment: vec4<f32>,
+    patch_count: u32,
+    use_state: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+fn patch_centre(p: Patch) -> vec3<f32> {
+    return (p.v0.xyz + p.v1.xyz + p.v2.xyz) / 3.0;
+}

@@ -1,0 +1,76 @@
+// Image estimate (DESIGN.md 2.5): for every camera pixel, the radiance that leaves the
+// point it sees toward the eye, added to the running sum of the image:
+//   E = Le_j + Lfs_j(x, w_e) + 2 pi J_j f_j(win_j, x, w_e)
+// with x the pixel's own surface point (the camera ray through this pass's sample hits the
+// plane of patch j there), the environment where no surface is, black on a back side.
+//
+// Compute, workgroup 8 x 8, one invocation per pixel. Bindings (group 0):
+//   0 camera        uniform Camera            read
+//   1 params        uniform EstimateParams    read
+//   2 item_buffer   texture_2d<u32>           read (patch index + 1 per pixel)
+//   3 patches       array<Patch>              read
+//   4 materials     array<Material>           read
+//   5 state         array<PatchState>         read
+//   6 fs_offsets    array<u32>                read (first shot CSR row starts, patch_count + 1)
+//   7 fs_entries    array<vec2<u32>>          read (x: light sample, y: bits of r_ij)
+//   8 samples       array<LightSample>        read
+//   9 image_sum     array<vec4<f32>>          read_write (one pixel per invocation: no race)
+// Host: src/stages/image_estimate.rs.
+
+@group(0) @binding(0) var<uniform> camera: Camera;
+@group(0) @binding(1) var<uniform> params: EstimateParams;
+@group(0) @binding(2) var item_buffer: texture_2d<u32>;
+@group(0) @binding(3) var<storage, read> patches: array<Patch>;
+@group(0) @binding(4) var<storage, read> materials: array<Material>;
+@group(0) @binding(5) var<storage, read> state: array<PatchState>;
+@group(0) @binding(6) var<storage, read> fs_offsets: array<u32>;
+@group(0) @binding(7) var<storage, read> fs_entries: array<vec2<u32>>;
+@group(0) @binding(8) var<storage, read> samples: array<LightSample>;
+@group(0) @binding(9) var<storage, read_write> image_sum: array<vec4<f32>>;
+
+// Reflected first-shot radiance of patch j at x toward w_out: sum_i S_i r_ij f(w'_i(x), w_out).
+fn first_shot_radiance(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
+    var sum = vec3<f32>(0.0);
+    for (var e = fs_offsets[j]; e < fs_offsets[j + 1u]; e++) {
+        let entry = fs_entries[e];
+        let s = samples[entry.x];
+        let w_in = normalize(s.position.xyz - x);
+        sum += s.strength.rgb * bitcast<f32>(entry.y) * brdf(m, n, w_in, w_out);
+    }
+    return sum;
+}
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let size = camera.size.xy;
+    if (gid.x >= size.x || gid.y >= size.y) {
+        return;
+    }
+    let id = textureLoad(item_buffer, vec2<i32>(gid.xy), 0).x;
+    var radiance = params.environment.rgb;
+    if (id != NO_PATCH && id <= params.patch_count) {
+        let j = id - 1u;
+        let p = patches[j];
+        let n = p.normal.xyz;
+        // The ray through this pass's sample point of the pixel.
+        let ndc = vec2<f32>(
+            2.0 * (f32(gid.x) + camera.jitter.x) / f32(size.x) - 1.0,
+            1.0 - 2.0 * (f32(gid.y) + camera.jitter.y) / f32(size.y));
+        let dir = normalize(camera.forward.xyz + ndc.x * camera.right.w * camera.right.xyz + ndc.y * camera.up.w * camera.up.xyz);
+        let w_out = -dir;
+        radiance = vec3<f32>(0.0);
+        let facing = dot(n, w_out);
+        if (facing > 0.0) {
+            let t = (p.normal.w - dot(n, camera.eye.xyz)) / dot(n, dir);
+            let x = camera.eye.xyz + t * dir;
+            let m = materials[p.material];
+            radiance = p.emission.rgb + first_shot_radiance(j, x, n, m, w_out);
+            if (params.use_state != 0u) {
+                let s = state[j];
+                radiance += 2.0 * PI * s.incoming.rgb * brdf(m, n, -s.direction.xyz, w_out);
+            }
+        }
+    }
+    let pixel = gid.y * size.x + gid.x;
+    image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
+}
