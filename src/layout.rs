@@ -15,6 +15,9 @@ pub const PATCH_FIRST_SHOT_LIGHT: u32 = 2;
 pub const NO_PATCH: u32 = 0;
 /// Camera and cube item buffers pack the twin bit into the top bit of the vertex's patch id.
 pub const VERTEX_TWIN_BIT: u32 = 1 << 31;
+/// Sums that must not depend on thread order are accumulated as exact 64-bit integers
+/// (two u32 atomics) of values in [0, 1] scaled by this.
+pub const FIXED_POINT_SCALE: f32 = 2147483648.0;
 /// The most patches a scene may have (ids must leave the twin bit free).
 pub const MAX_PATCHES: u32 = 1 << 27;
 
@@ -84,7 +87,8 @@ pub struct GpuCamera {
     pub up: [f32; 4],
     /// xyz: unit view direction; w: near distance of the reversed-z projection.
     pub forward: [f32; 4],
-    /// xy: sample position inside the pixel, each in [0, 1); zw: unused.
+    /// xy: sample position inside the pixel, each in [0, 1); zw: centre of the view window
+    /// in tangent units (0 for a camera; off-centre for the faces of a cubic tetrahedron).
     pub jitter: [f32; 4],
     /// x: width, y: height in pixels.
     pub size: [u32; 4],
@@ -101,6 +105,35 @@ pub struct GpuEstimateParams {
     /// 1 when the iteration state holds J (after step 1), 0 before.
     pub use_state: u32,
     pub _pad: [u32; 2],
+}
+
+/// One face of a light sample's window, for the first-shot reduction.
+/// WGSL: `FaceParams`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuFaceParams {
+    /// Index of the light sample.
+    pub sample: u32,
+    /// Number of patches (ids above are invalid).
+    pub patch_count: u32,
+    /// Rows of the face that lie in the window (half faces of a hemicube stop early).
+    pub rows: u32,
+    pub _pad: u32,
+}
+
+/// Parameters of turning a sample's sums into r_ij and appending them. WGSL: `AppendParams`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuAppendParams {
+    pub sample: u32,
+    pub patch_count: u32,
+    /// Capacity of the pair list; pairs past it are counted, not written.
+    pub capacity: u32,
+    pub _pad0: u32,
+    /// Solid angle of a pixel at the face centre times 1/(4 pi) (point light) or w_i
+    /// (area-light vertex), divided by the fixed-point scale.
+    pub factor: f32,
+    pub _pad1: [u32; 3],
 }
 
 /// A vertex of the rasterised patch triangles: position and patch id (with
@@ -122,6 +155,8 @@ assert_size_multiple_of_16!(
     GpuPatchState,
     GpuCamera,
     GpuEstimateParams,
+    GpuFaceParams,
+    GpuAppendParams,
     RasterVertex
 );
 
@@ -143,6 +178,8 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuPatchState => "PatchState" { incoming, direction }),
         layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),
         layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, use_state }),
+        layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
+        layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
     ]
 }
 
@@ -154,7 +191,9 @@ pub fn wgsl_constants() -> String {
          const PATCH_FIRST_SHOT_LIGHT: u32 = {PATCH_FIRST_SHOT_LIGHT}u;\n\
          const NO_PATCH: u32 = {NO_PATCH}u;\n\
          const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
-         const PI: f32 = {pi:?};\n",
-        pi = std::f32::consts::PI
+         const PI: f32 = {pi:?};\n\
+         const FIXED_POINT_SCALE: f32 = {scale:?};\n",
+        pi = std::f32::consts::PI,
+        scale = FIXED_POINT_SCALE
     )
 }

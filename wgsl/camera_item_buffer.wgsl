@@ -26,7 +26,8 @@ fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32) -> Vert
     // Shift so that the sample point inside the pixel maps to the pixel's centre.
     let shift = vec2<f32>(2.0 * (0.5 - camera.jitter.x) / size.x, -2.0 * (0.5 - camera.jitter.y) / size.y);
     var out: VertexOut;
-    out.clip = vec4<f32>(x / camera.right.w + shift.x * z, y / camera.up.w + shift.y * z, camera.forward.w, z);
+    let window = vec2<f32>(x, y) - camera.jitter.zw * z;
+    out.clip = vec4<f32>(window.x / camera.right.w + shift.x * z, window.y / camera.up.w + shift.y * z, camera.forward.w, z);
     out.patch_id = patch_id;
     return out;
 }

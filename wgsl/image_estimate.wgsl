@@ -53,10 +53,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let p = patches[j];
         let n = p.normal.xyz;
         // The ray through this pass's sample point of the pixel.
-        let ndc = vec2<f32>(
-            2.0 * (f32(gid.x) + camera.jitter.x) / f32(size.x) - 1.0,
-            1.0 - 2.0 * (f32(gid.y) + camera.jitter.y) / f32(size.y));
-        let dir = normalize(camera.forward.xyz + ndc.x * camera.right.w * camera.right.xyz + ndc.y * camera.up.w * camera.up.xyz);
+        let dir = normalize(pixel_direction(camera, gid.xy));
         let w_out = -dir;
         radiance = vec3<f32>(0.0);
         let facing = dot(n, w_out);

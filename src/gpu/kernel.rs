@@ -26,6 +26,15 @@ pub const KERNELS: &[(&str, &str)] = &[
         include_str!("../../wgsl/image_estimate.wgsl"),
     ),
     ("brdf_probe", include_str!("../../wgsl/brdf_probe.wgsl")),
+    ("prefix_sum", include_str!("../../wgsl/prefix_sum.wgsl")),
+    (
+        "first_shot_reduce",
+        include_str!("../../wgsl/first_shot_reduce.wgsl"),
+    ),
+    (
+        "first_shot_table",
+        include_str!("../../wgsl/first_shot_table.wgsl"),
+    ),
 ];
 
 /// The full source of one kernel: generated header, common files, the kernel itself.

@@ -3,6 +3,7 @@
 use crate::gpu::{buffers, kernel};
 use crate::layout::{GpuCamera, RasterVertex};
 use crate::scene::Camera;
+use glam::DVec3;
 
 pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -16,19 +17,56 @@ pub fn gpu_camera(
     near: f64,
     jitter: [f32; 2],
 ) -> GpuCamera {
-    let forward = (camera.look_at - camera.position).normalize();
-    let right = forward.cross(camera.up).normalize();
-    let up = right.cross(forward);
     let tan_y = (camera.fov_y.to_radians() * 0.5).tan();
     let tan_x = tan_y * width as f64 / height as f64;
-    let f = |v: glam::DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
-    GpuCamera {
-        eye: f(camera.position, 1.0),
-        right: f(right, tan_x),
-        up: f(up, tan_y),
-        forward: f(forward, near),
-        jitter: [jitter[0], jitter[1], 0.0, 0.0],
-        size: [width, height, 0, 0],
+    View {
+        eye: camera.position,
+        forward: (camera.look_at - camera.position).normalize(),
+        up_hint: camera.up,
+        tan: [tan_x, tan_y],
+        window_centre: [0.0, 0.0],
+        size: [width, height],
+        near,
+    }
+    .gpu(jitter)
+}
+
+/// A pinhole view: a camera, or one face of a light sample's window.
+#[derive(Debug, Clone, Copy)]
+pub struct View {
+    pub eye: DVec3,
+    /// Unit view direction (the face normal for a window face).
+    pub forward: DVec3,
+    /// Made orthogonal to `forward` to give the image's up.
+    pub up_hint: DVec3,
+    /// Half extents of the view window at focal distance 1.
+    pub tan: [f64; 2],
+    /// Centre of the view window in (right, up) coordinates at focal distance 1.
+    pub window_centre: [f64; 2],
+    pub size: [u32; 2],
+    pub near: f64,
+}
+
+impl View {
+    /// Right-handed as SCENE_FORMAT.md says: right = normalize(forward x up).
+    pub fn gpu(&self, jitter: [f32; 2]) -> GpuCamera {
+        let forward = self.forward.normalize();
+        let right = forward.cross(self.up_hint).normalize();
+        let up = right.cross(forward);
+        let f = |v: DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
+        GpuCamera {
+            eye: f(self.eye, 1.0),
+            right: f(right, self.tan[0]),
+            up: f(up, self.tan[1]),
+            forward: f(forward, self.near),
+            jitter: [
+                jitter[0],
+                jitter[1],
+                self.window_centre[0] as f32,
+                self.window_centre[1] as f32,
+            ],
+            size: [self.size[0], self.size[1], 0, 0],
+        }
     }
 }
 
@@ -154,6 +192,17 @@ impl CameraItemBuffer {
         vertices: &wgpu::Buffer,
         patch_count: u32,
     ) {
+        self.record_rows(encoder, vertices, patch_count, self.height);
+    }
+
+    /// As `record`, rasterising only the top `rows` rows (half faces of a hemicube).
+    pub fn record_rows(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        vertices: &wgpu::Buffer,
+        patch_count: u32,
+        rows: u32,
+    ) {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("firstshot.camera_item_buffer.pass"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -178,6 +227,7 @@ impl CameraItemBuffer {
             multiview_mask: None,
         });
         pass.set_pipeline(&self.pipeline);
+        pass.set_scissor_rect(0, 0, self.width, rows.clamp(1, self.height));
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(0, vertices.slice(..));
         pass.draw(0..patch_count * 3, 0..1);

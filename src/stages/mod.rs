@@ -3,4 +3,7 @@
 
 pub mod brdf_probe;
 pub mod camera_item_buffer;
+pub mod first_shot_reduce;
+pub mod first_shot_table;
 pub mod image_estimate;
+pub mod prefix_sum;

@@ -46,3 +46,125 @@ pub fn output_dir(name: &str) -> PathBuf {
 pub fn refs_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/refs")
 }
+
+use firstshot::scene::{LightSample, Patch, PatchKind, Patches};
+use glam::DVec3;
+
+/// A one-sided black patch from three vertices (counter-clockwise from the front).
+pub fn patch(v: [DVec3; 3]) -> Patch {
+    let c = (v[1] - v[0]).cross(v[2] - v[0]);
+    Patch {
+        vertices: v,
+        normal: c.normalize(),
+        area: 0.5 * c.length(),
+        material: None,
+        emission: [0.0; 3],
+        kind: PatchKind::Surface { surface: 0 },
+        twin: false,
+    }
+}
+
+/// Splits a triangle into k^2 congruent ones (the test's own tessellation).
+pub fn split(v: [DVec3; 3], k: u32) -> Vec<[DVec3; 3]> {
+    let p = |i: u32, j: u32| {
+        v[0] + (v[1] - v[0]) * (i as f64 / k as f64) + (v[2] - v[0]) * (j as f64 / k as f64)
+    };
+    let mut out = Vec::new();
+    for i in 0..k {
+        for j in 0..k - i {
+            out.push([p(i, j), p(i + 1, j), p(i, j + 1)]);
+            if i + j + 1 < k {
+                out.push([p(i + 1, j), p(i + 1, j + 1), p(i, j + 1)]);
+            }
+        }
+    }
+    out
+}
+
+/// The 12 triangles of an axis-aligned box, fronts facing inward (a closed room).
+pub fn room(lo: DVec3, hi: DVec3) -> Vec<[DVec3; 3]> {
+    let c = |x: usize, y: usize, z: usize| {
+        DVec3::new([lo.x, hi.x][x], [lo.y, hi.y][y], [lo.z, hi.z][z])
+    };
+    let quads = [
+        [c(0, 0, 0), c(1, 0, 0), c(1, 0, 1), c(0, 0, 1)], // floor, normal +y
+        [c(0, 1, 0), c(0, 1, 1), c(1, 1, 1), c(1, 1, 0)], // ceiling, -y
+        [c(0, 0, 0), c(0, 0, 1), c(0, 1, 1), c(0, 1, 0)], // x = lo, +x
+        [c(1, 0, 0), c(1, 1, 0), c(1, 1, 1), c(1, 0, 1)], // x = hi, -x
+        [c(0, 0, 0), c(0, 1, 0), c(1, 1, 0), c(1, 0, 0)], // z = lo, +z
+        [c(0, 0, 1), c(1, 0, 1), c(1, 1, 1), c(0, 1, 1)], // z = hi, -z
+    ];
+    let centre = (lo + hi) * 0.5;
+    let mut out = Vec::new();
+    for q in quads {
+        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+            let n = (t[1] - t[0]).cross(t[2] - t[0]);
+            out.push(if n.dot(centre - t[0]) > 0.0 {
+                t
+            } else {
+                [t[0], t[2], t[1]]
+            });
+        }
+    }
+    out
+}
+
+pub fn point_sample(position: DVec3) -> LightSample {
+    LightSample {
+        position,
+        normal: None,
+        strength: [1.0; 3],
+        weight: 1.0,
+        light: 0,
+    }
+}
+
+pub fn patches_of(triangles: &[[DVec3; 3]], samples: Vec<LightSample>) -> Patches {
+    Patches {
+        patches: triangles.iter().map(|&t| patch(t)).collect(),
+        samples,
+    }
+}
+
+/// Solid angle of a triangle seen from `p` (Van Oosterom and Strackee, 1983).
+pub fn solid_angle(p: DVec3, t: [DVec3; 3]) -> f64 {
+    let (a, b, c) = (t[0] - p, t[1] - p, t[2] - p);
+    let (la, lb, lc) = (a.length(), b.length(), c.length());
+    let num = a.dot(b.cross(c)).abs();
+    let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+    2.0 * num.atan2(den)
+}
+
+/// A scene with a default camera and nothing else, for tests that bring their own patches.
+pub fn bare_scene() -> firstshot::scene::Scene {
+    firstshot::scene::Scene {
+        source: "test".into(),
+        camera: firstshot::scene::Camera {
+            position: DVec3::new(0.0, 0.0, -5.0),
+            look_at: DVec3::ZERO,
+            up: DVec3::Y,
+            fov_y: 40.0,
+            width: 32,
+            height: 32,
+        },
+        environment: [0.0; 3],
+        settings: firstshot::scene::Settings::default(),
+        materials: vec![],
+        surfaces: vec![],
+        lights: vec![],
+    }
+}
+
+/// Runs the first shot over hand-made patches and returns the table by patch.
+pub fn first_shot_table(
+    ctx: &firstshot::gpu::Context,
+    patches: &Patches,
+    resolution: u32,
+    window: firstshot::first_shot::LightWindow,
+) -> Vec<Vec<(u32, f32)>> {
+    let scene = bare_scene();
+    let mut buffers =
+        firstshot::gpu::scene_buffers::SceneBuffers::new(&ctx.device, &scene, patches, true);
+    firstshot::first_shot::run(ctx, &mut buffers, patches, resolution, window).unwrap();
+    firstshot::first_shot::read_table(ctx, &buffers).unwrap()
+}

@@ -39,7 +39,7 @@ struct Camera {
     right: vec4<f32>,    // w tan(fov_x / 2)
     up: vec4<f32>,       // w tan(fov_y / 2)
     forward: vec4<f32>,  // w near distance
-    jitter: vec4<f32>,   // xy in [0, 1)
+    jitter: vec4<f32>,   // xy in [0, 1), zw window centre (tangent units)
     size: vec4<u32>,     // x width, y height
 }
 
@@ -50,6 +50,37 @@ struct EstimateParams {
     use_state: u32,
     _pad0: u32,
     _pad1: u32,
+}
+
+// One face of a light sample's window (Rust: GpuFaceParams).
+struct FaceParams {
+    sample: u32,
+    patch_count: u32,
+    rows: u32,
+    _pad0: u32,
+}
+
+// Sums -> r_ij for one light sample (Rust: GpuAppendParams).
+struct AppendParams {
+    sample: u32,
+    patch_count: u32,
+    capacity: u32,
+    _pad0: u32,
+    factor: f32,
+    _pad1: u32,
+    _pad2: u32,
+    _pad3: u32,
+}
+
+// Direction (not normalised) through the sample point of pixel `pixel` of a camera or face:
+// forward + window position in tangent units.
+fn pixel_direction(camera: Camera, pixel: vec2<u32>) -> vec3<f32> {
+    let size = vec2<f32>(camera.size.xy);
+    let ndc = vec2<f32>(
+        2.0 * (f32(pixel.x) + camera.jitter.x) / size.x - 1.0,
+        1.0 - 2.0 * (f32(pixel.y) + camera.jitter.y) / size.y);
+    let window = ndc * vec2<f32>(camera.right.w, camera.up.w) + camera.jitter.zw;
+    return camera.forward.xyz + window.x * camera.right.xyz + window.y * camera.up.xyz;
 }
 
 fn patch_centre(p: Patch) -> vec3<f32> {

@@ -1,0 +1,294 @@
+//! Incoming first shot (DESIGN.md 1): item buffers around every light sample, reduced on
+//! the GPU into the scalar factors r_ij, stored by patch in `SceneBuffers::first_shot`.
+
+use crate::gpu::scene_buffers::SceneBuffers;
+use crate::gpu::{Context, buffers};
+use crate::layout::{FIXED_POINT_SCALE, GpuAppendParams, GpuFaceParams};
+use crate::scene::{LightSample, Patches};
+use crate::stages::camera_item_buffer::{CameraItemBuffer, View};
+use crate::stages::first_shot_reduce::FirstShotReduce;
+use crate::stages::first_shot_table;
+use crate::{Error, Result};
+use glam::DVec3;
+use serde::Serialize;
+use std::time::Instant;
+
+/// The window of faces around an area-light sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightWindow {
+    /// One full and four half cube faces above the light (the paper's hemicube).
+    Hemicube,
+    /// Three faces of a cube whose corner points along the light's normal (cubic
+    /// tetrahedron): fewer passes, larger pixels at the same resolution.
+    Tetrahedron,
+}
+
+impl std::str::FromStr for LightWindow {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "hemicube" => Ok(LightWindow::Hemicube),
+            "tetrahedron" => Ok(LightWindow::Tetrahedron),
+            _ => Err(format!("expected hemicube or tetrahedron, got {s:?}")),
+        }
+    }
+}
+
+/// What the first shot did.
+#[derive(Debug, Clone, Serialize)]
+pub struct FirstShotStats {
+    pub samples: usize,
+    pub faces: usize,
+    /// Stored (patch, sample) pairs: those that see each other.
+    pub pairs: u32,
+    pub resolution: u32,
+    pub window: LightWindow,
+    pub ms: f64,
+}
+
+/// One face to render: its view, the rows that lie in the window.
+struct Face {
+    view: View,
+    rows: u32,
+}
+
+fn orthonormal_frame(n: DVec3) -> (DVec3, DVec3) {
+    let t1 = n.any_orthonormal_vector();
+    (t1, n.cross(t1))
+}
+
+/// The faces around `sample` at `resolution` pixels per face edge, and the solid angle
+/// of a face's centre pixel (the same for all of them).
+fn faces(
+    sample: &LightSample,
+    window: LightWindow,
+    resolution: u32,
+    near: f64,
+) -> (Vec<Face>, f64) {
+    let view = |forward: DVec3, up: DVec3, tan: f64, centre: [f64; 2]| View {
+        eye: sample.position,
+        forward,
+        up_hint: up,
+        tan: [tan, tan],
+        window_centre: centre,
+        size: [resolution, resolution],
+        near,
+    };
+    let full = |view: View| Face {
+        view,
+        rows: resolution,
+    };
+    let cube_pixel = 4.0 / (resolution as f64 * resolution as f64);
+    match sample.normal {
+        None => {
+            let axes = [
+                DVec3::X,
+                -DVec3::X,
+                DVec3::Y,
+                -DVec3::Y,
+                DVec3::Z,
+                -DVec3::Z,
+            ];
+            let faces = axes
+                .iter()
+                .map(|&a| {
+                    full(view(
+                        a,
+                        if a.y.abs() > 0.5 { DVec3::Z } else { DVec3::Y },
+                        1.0,
+                        [0.0, 0.0],
+                    ))
+                })
+                .collect();
+            (faces, cube_pixel)
+        }
+        Some(n) => {
+            let (t1, t2) = orthonormal_frame(n);
+            match window {
+                LightWindow::Hemicube => {
+                    let mut faces = vec![full(view(n, t1, 1.0, [0.0, 0.0]))];
+                    // Side faces with the light's normal as their up: the top half of
+                    // each lies above the light's plane.
+                    for side in [t1, -t1, t2, -t2] {
+                        faces.push(Face {
+                            view: view(side, n, 1.0, [0.0, 0.0]),
+                            rows: resolution.div_ceil(2),
+                        });
+                    }
+                    (faces, cube_pixel)
+                }
+                LightWindow::Tetrahedron => {
+                    // Three orthonormal axes e_k with n = (e_1 + e_2 + e_3) / sqrt(3). The
+                    // face x_k = 1 is hit first where x_k is the largest coordinate; with
+                    // n . u > 0 that is the triangle x_j, x_l <= 1, x_j + x_l > -1, inside
+                    // the square [-2, 1]^2: a window of half extent 1.5 centred at -0.5.
+                    let e: Vec<DVec3> = (0..3)
+                        .map(|k| {
+                            let a = 2.0 * std::f64::consts::PI * k as f64 / 3.0;
+                            n / 3f64.sqrt() + (2.0f64 / 3.0).sqrt() * (a.cos() * t1 + a.sin() * t2)
+                        })
+                        .collect();
+                    let faces = (0..3)
+                        .map(|k| {
+                            let (forward, a, b) = (e[k], e[(k + 1) % 3], e[(k + 2) % 3]);
+                            let right = forward.cross(b).normalize();
+                            let up = right.cross(forward);
+                            let centre = forward - 0.5 * (a + b);
+                            full(view(forward, b, 1.5, [centre.dot(right), centre.dot(up)]))
+                        })
+                        .collect();
+                    let pixel = 9.0 / (resolution as f64 * resolution as f64);
+                    (faces, pixel)
+                }
+            }
+        }
+    }
+}
+
+/// Runs the first shot and stores its table in `buffers.first_shot`.
+pub fn run(
+    ctx: &Context,
+    buffers: &mut SceneBuffers,
+    patches: &Patches,
+    resolution: u32,
+    window: LightWindow,
+) -> Result<FirstShotStats> {
+    let start = Instant::now();
+    let device = &ctx.device;
+    let limits = ctx.limits();
+    if resolution > limits.max_texture_dimension_2d {
+        return Err(Error::Limits(format!(
+            "--hemicube-resolution {resolution} exceeds the device's largest texture side {}",
+            limits.max_texture_dimension_2d
+        )));
+    }
+    let n = buffers.patch_count as u64;
+    let samples = patches.samples.len() as u64;
+    let max_pairs =
+        (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size) / 16;
+    // Every pair fits when each patch sees every sample; start there when that is small,
+    // else grow on overflow below.
+    let mut capacity = (n * samples).clamp(1, 1 << 22).min(max_pairs) as u32;
+    let near = buffers.radius * 1e-6;
+    let item_buffer = CameraItemBuffer::new(device, resolution, resolution);
+    loop {
+        let reduce = FirstShotReduce::new(device, buffers, &item_buffer, capacity);
+        let mut face_count = 0;
+        for (i, sample) in patches.samples.iter().enumerate() {
+            let (faces, pixel) = faces(sample, window, resolution, near);
+            for face in &faces {
+                ctx.queue.write_buffer(
+                    &item_buffer.camera,
+                    0,
+                    bytemuck::bytes_of(&face.view.gpu([0.5, 0.5])),
+                );
+                let params = GpuFaceParams {
+                    sample: i as u32,
+                    patch_count: buffers.patch_count,
+                    rows: face.rows,
+                    _pad: 0,
+                };
+                ctx.queue
+                    .write_buffer(&reduce.face_params, 0, bytemuck::bytes_of(&params));
+                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("firstshot.first_shot.face"),
+                });
+                item_buffer.record_rows(
+                    &mut encoder,
+                    &buffers.vertices,
+                    buffers.patch_count,
+                    face.rows,
+                );
+                reduce.record_face(&mut encoder, face.rows);
+                ctx.queue.submit([encoder.finish()]);
+                face_count += 1;
+            }
+            let factor = pixel
+                * match sample.normal {
+                    None => 1.0 / (4.0 * std::f64::consts::PI),
+                    Some(_) => sample.weight,
+                }
+                / FIXED_POINT_SCALE as f64;
+            let append = GpuAppendParams {
+                sample: i as u32,
+                patch_count: buffers.patch_count,
+                capacity,
+                _pad0: 0,
+                factor: factor as f32,
+                _pad1: [0; 3],
+            };
+            ctx.queue
+                .write_buffer(&reduce.append_params, 0, bytemuck::bytes_of(&append));
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("firstshot.first_shot.append"),
+            });
+            reduce.record_append(&mut encoder);
+            ctx.queue.submit([encoder.finish()]);
+        }
+        let total = buffers::read_back::<u32>(device, &ctx.queue, &reduce.pair_count, 4)?[0];
+        if total > capacity {
+            if total as u64 > max_pairs {
+                return Err(Error::Limits(format!(
+                    "the first shot found {total} (patch, light sample) pairs, more than one buffer of this device holds ({max_pairs}); use a larger --patch-size or fewer light subdivisions"
+                )));
+            }
+            // The list was too short: pairs past its end were counted, not stored. Run
+            // again with room for all of them.
+            capacity = total;
+            continue;
+        }
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("firstshot.first_shot.table"),
+        });
+        let (table, _temporaries, _scan) = first_shot_table::build(
+            device,
+            &mut encoder,
+            buffers.patch_count,
+            &reduce.pairs,
+            total,
+            &reduce.row_counts,
+        );
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait()?;
+        buffers.first_shot = table;
+        return Ok(FirstShotStats {
+            samples: patches.samples.len(),
+            faces: face_count,
+            pairs: total,
+            resolution,
+            window,
+            ms: start.elapsed().as_secs_f64() * 1e3,
+        });
+    }
+}
+
+/// The table read back: for every patch, its (sample, r_ij) pairs. For tests and tools.
+pub fn read_table(ctx: &Context, buffers: &SceneBuffers) -> Result<Vec<Vec<(u32, f32)>>> {
+    let n = buffers.patch_count as usize;
+    let offsets: Vec<u32> = buffers::read_back(
+        &ctx.device,
+        &ctx.queue,
+        &buffers.first_shot.offsets,
+        4 * (n as u64 + 1),
+    )?;
+    let count = buffers.first_shot.entry_count as u64;
+    let entries: Vec<[u32; 2]> = if count == 0 {
+        vec![]
+    } else {
+        buffers::read_back(
+            &ctx.device,
+            &ctx.queue,
+            &buffers.first_shot.entries,
+            8 * count,
+        )?
+    };
+    Ok((0..n)
+        .map(|j| {
+            entries[offsets[j] as usize..offsets[j + 1] as usize]
+                .iter()
+                .map(|e| (e[0], f32::from_bits(e[1])))
+                .collect()
+        })
+        .collect())
+}

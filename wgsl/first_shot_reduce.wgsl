@@ -1,0 +1,90 @@
+// First-shot reduction (DESIGN.md 1). `reduce_face` adds, for every pixel of one face of a
+// light sample's window, the pixel's weight cos^3(theta_p) (times cos(theta_L) for an
+// area-light vertex) to the sum of the patch seen there, if the patch's front faces the
+// sample. `append_sample` then turns each non-zero sum into r_ij and appends the pair
+// (patch, sample, r_ij) to a list, clearing the sum for the next sample.
+//
+// Sums are exact 64-bit integers (weights in [0, 1] times FIXED_POINT_SCALE, split over two
+// u32 atomics), so the result does not depend on thread order and needs no float atomics.
+//
+// Compute. reduce_face: workgroup 8 x 8, one invocation per face pixel. append_sample:
+// workgroup 64, one invocation per patch (2D dispatch past 65535 workgroups).
+// Bindings (group 0):
+//   0 face        uniform Camera          read   (reduce_face)
+//   1 params      uniform FaceParams      read   (reduce_face)
+//   2 item_buffer texture_2d<u32>         read   (reduce_face)
+//   3 patches     array<Patch>            read
+//   4 samples     array<LightSample>      read   (reduce_face)
+//   5 sums        array<atomic<u32>>      read_write (lo, hi per patch)
+//   6 append      uniform AppendParams    read   (append_sample)
+//   7 row_counts  array<u32>              read_write (pairs per patch; one writer per patch)
+//   8 pairs       array<vec4<u32>>        read_write (patch, sample, bits of r_ij, 0)
+//   9 pair_count  atomic<u32>             read_write (may exceed capacity: then the host
+//                                         grows the list and runs the first shot again)
+// Host: src/stages/first_shot_reduce.rs.
+
+@group(0) @binding(0) var<uniform> face: Camera;
+@group(0) @binding(1) var<uniform> params: FaceParams;
+@group(0) @binding(2) var item_buffer: texture_2d<u32>;
+@group(0) @binding(3) var<storage, read> patches: array<Patch>;
+@group(0) @binding(4) var<storage, read> samples: array<LightSample>;
+@group(0) @binding(5) var<storage, read_write> sums: array<atomic<u32>>;
+@group(0) @binding(6) var<uniform> append: AppendParams;
+@group(0) @binding(7) var<storage, read_write> row_counts: array<u32>;
+@group(0) @binding(8) var<storage, read_write> pairs: array<vec4<u32>>;
+@group(0) @binding(9) var<storage, read_write> pair_count: atomic<u32>;
+
+@compute @workgroup_size(8, 8)
+fn reduce_face(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= face.size.x || gid.y >= params.rows) {
+        return;
+    }
+    let id = textureLoad(item_buffer, vec2<i32>(gid.xy), 0).x;
+    if (id == NO_PATCH || id > params.patch_count) {
+        return;
+    }
+    let j = id - 1u;
+    let n = patches[j].normal;
+    let s = samples[params.sample];
+    // Only front faces receive: the sample must lie on the front side of the patch's plane.
+    if (dot(n.xyz, s.position.xyz) - n.w <= 0.0) {
+        return;
+    }
+    let v = pixel_direction(face, gid.xy);
+    let len = length(v);
+    // The face's normal is `forward` (unit) at focal distance 1, so cos(theta_p) = 1 / |v|.
+    var weight = 1.0 / (len * len * len);
+    if (s.position.w > 0.5) {
+        weight *= max(dot(v / len, s.normal.xyz), 0.0);
+    }
+    let fixed = u32(min(weight, 1.0) * FIXED_POINT_SCALE + 0.5);
+    if (fixed == 0u) {
+        return;
+    }
+    let old = atomicAdd(&sums[2u * j], fixed);
+    if (old > 0xffffffffu - fixed) {
+        atomicAdd(&sums[2u * j + 1u], 1u);
+    }
+}
+
+@compute @workgroup_size(64)
+fn append_sample(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let j = gid.x + gid.y * groups.x * 64u;
+    if (j >= append.patch_count) {
+        return;
+    }
+    let lo = atomicLoad(&sums[2u * j]);
+    let hi = atomicLoad(&sums[2u * j + 1u]);
+    if ((lo | hi) == 0u) {
+        return;
+    }
+    atomicStore(&sums[2u * j], 0u);
+    atomicStore(&sums[2u * j + 1u], 0u);
+    let sum = f32(hi) * 4294967296.0 + f32(lo);
+    let r = sum * append.factor / patches[j].v0.w;
+    row_counts[j] += 1u;
+    let slot = atomicAdd(&pair_count, 1u);
+    if (slot < append.capacity) {
+        pairs[slot] = vec4<u32>(j, append.sample, bitcast<u32>(r), 0u);
+    }
+}

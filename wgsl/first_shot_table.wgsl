@@ -1,0 +1,50 @@
+// First-shot table: the appended (patch, sample, r_ij) pairs into compressed rows by patch.
+// `fill_rows` places each pair in its patch's row (row starts from the prefix sum of the
+// row counts); `sort_rows` orders each row by sample index, so the table does not depend
+// on the order in which the pairs were appended.
+//
+// Compute, workgroup 64. fill_rows: one invocation per pair; sort_rows: one per patch
+// (2D dispatch past 65535 workgroups). Bindings (group 0):
+//   0 params   uniform vec4<u32> (x: pairs, y: patches)  read
+//   1 pairs    array<vec4<u32>>     read
+//   2 offsets  array<u32>           read (patches + 1 row starts)
+//   3 cursor   array<atomic<u32>>   read_write (zeroed before fill_rows)
+//   4 entries  array<vec2<u32>>     read_write (sample, bits of r_ij)
+// Host: src/stages/first_shot_table.rs.
+
+@group(0) @binding(0) var<uniform> params: vec4<u32>;
+@group(0) @binding(1) var<storage, read> pairs: array<vec4<u32>>;
+@group(0) @binding(2) var<storage, read> offsets: array<u32>;
+@group(0) @binding(3) var<storage, read_write> cursor: array<atomic<u32>>;
+@group(0) @binding(4) var<storage, read_write> entries: array<vec2<u32>>;
+
+@compute @workgroup_size(64)
+fn fill_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let k = gid.x + gid.y * groups.x * 64u;
+    if (k >= params.x) {
+        return;
+    }
+    let pair = pairs[k];
+    let slot = offsets[pair.x] + atomicAdd(&cursor[pair.x], 1u);
+    entries[slot] = pair.yz;
+}
+
+@compute @workgroup_size(64)
+fn sort_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let j = gid.x + gid.y * groups.x * 64u;
+    if (j >= params.y) {
+        return;
+    }
+    let begin = offsets[j];
+    let end = offsets[j + 1u];
+    // Rows hold at most one entry per light sample: short, so insertion sort.
+    for (var a = begin + 1u; a < end; a++) {
+        let item = entries[a];
+        var b = a;
+        while (b > begin && entries[b - 1u].x > item.x) {
+            entries[b] = entries[b - 1u];
+            b--;
+        }
+        entries[b] = item;
+    }
+}
