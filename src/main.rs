@@ -5,6 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use firstshot::gpu::context::{AdapterChoice, Context, list_adapters};
 use firstshot::image::{Image, image_error};
 use firstshot::render::{RenderOptions, render};
+use firstshot::first_shot::LightWindow;
 use firstshot::scene;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -50,6 +51,12 @@ struct RenderArgs {
     /// Longest patch edge after tessellation (scene units).
     #[arg(long, value_name = "X")]
     patch_size: Option<f64>,
+    /// Pixels along a full cube-face edge of the first shot's item buffers.
+    #[arg(long, value_name = "R")]
+    hemicube_resolution: Option<u32>,
+    /// The window around area-light samples: hemicube | tetrahedron.
+    #[arg(long, value_name = "W")]
+    light_window: Option<LightWindow>,
     /// Image width in pixels.
     #[arg(long, value_name = "W")]
     width: Option<u32>,
@@ -196,7 +203,10 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         }
         options.patch_size = v;
     }
-    for (flag, v) in [("--width", args.width), ("--height", args.height)] {
+    if let Some(v) = args.light_window {
+        options.light_window = v;
+    }
+    for (flag, v) in [("--width", args.width), ("--height", args.height), ("--hemicube-resolution", args.hemicube_resolution)] {
         if let Some(v) = v
             && !(1..=16384).contains(&v)
         {
@@ -205,6 +215,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     }
     options.width = args.width.unwrap_or(options.width);
     options.height = args.height.unwrap_or(options.height);
+    options.hemicube_resolution = args.hemicube_resolution.unwrap_or(options.hemicube_resolution);
     let (exr_path, png_path) = output_paths(&args, &scene_path)?;
     say(format!(
         "loaded {} in {:.0} ms",
@@ -226,6 +237,16 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
 
     let mut rendered = render(&ctx, &scene, &patches, &options)?;
+    if rendered.stats.first_shot {
+        say(format!(
+            "first shot: {} light samples, {} faces of {r}x{r}, {} pairs, {:.0} ms",
+            rendered.stats.light_samples,
+            rendered.stats.first_shot_faces,
+            rendered.stats.first_shot_pairs,
+            rendered.stats.first_shot_ms,
+            r = options.hemicube_resolution
+        ));
+    }
     rendered.stats.tessellation_ms = tessellation_ms;
     rendered.stats.total_ms = start.elapsed().as_secs_f64() * 1e3;
 

@@ -5,6 +5,7 @@ use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{AdapterSummary, Context};
 use crate::image::Image;
 use crate::layout::*;
+use crate::first_shot::{self, LightWindow};
 use crate::rng::StepRng;
 use crate::scene::{Patches, Scene};
 use crate::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
@@ -26,6 +27,9 @@ pub struct RenderOptions {
     pub patch_size: f64,
     pub iterations: u32,
     pub seed: u64,
+    /// Pixels along a full cube-face edge of the first shot's item buffers.
+    pub hemicube_resolution: u32,
+    pub light_window: LightWindow,
 }
 
 impl RenderOptions {
@@ -36,6 +40,8 @@ impl RenderOptions {
             patch_size: scene.settings.patch_size,
             iterations: scene.settings.iterations,
             seed: scene.settings.seed,
+            hemicube_resolution: scene.settings.hemicube_resolution,
+            light_window: LightWindow::Hemicube,
         }
     }
 }
@@ -50,6 +56,13 @@ pub struct RenderStats {
     pub image: [u32; 2],
     pub patch_size: f64,
     pub camera_samples: u32,
+    pub first_shot: bool,
+    pub hemicube_resolution: u32,
+    pub light_window: LightWindow,
+    /// Stored (patch, light sample) pairs of the first shot.
+    pub first_shot_pairs: u32,
+    pub first_shot_faces: usize,
+    pub first_shot_ms: f64,
     pub iterations: u32,
     pub seed: u64,
     pub tessellation_ms: f64,
@@ -140,8 +153,16 @@ pub fn render(
     }
     let device = &ctx.device;
     let upload = Instant::now();
-    let buffers = SceneBuffers::new(device, scene, patches, true);
+    let mut buffers = SceneBuffers::new(device, scene, patches, true);
     let camera = CameraItemBuffer::new(device, options.width, options.height);
+    let upload_ms = milliseconds(upload);
+
+    let fs = if patches.samples.is_empty() {
+        None
+    } else {
+        Some(first_shot::run(ctx, &mut buffers, patches, options.hemicube_resolution, options.light_window)?)
+    };
+    // Built after the first shot: it binds the first-shot table.
     let estimate = ImageEstimate::new(device, &buffers, &camera);
     ctx.queue.write_buffer(
         &estimate.params,
@@ -158,7 +179,6 @@ pub fn render(
             _pad: [0; 2],
         }),
     );
-    let upload_ms = milliseconds(upload);
 
     let image_start = Instant::now();
     let near = buffers.radius * 1e-5;
@@ -197,6 +217,12 @@ pub fn render(
             image: [options.width, options.height],
             patch_size: options.patch_size,
             camera_samples: per_axis * per_axis,
+            first_shot: fs.is_some(),
+            hemicube_resolution: options.hemicube_resolution,
+            light_window: options.light_window,
+            first_shot_pairs: fs.as_ref().map_or(0, |f| f.pairs),
+            first_shot_faces: fs.as_ref().map_or(0, |f| f.faces),
+            first_shot_ms: fs.as_ref().map_or(0.0, |f| f.ms),
             iterations: 0,
             seed: options.seed,
             tessellation_ms: 0.0,
