@@ -8,11 +8,7 @@ pub enum Error {
     /// A scene file (or a file it references) is malformed or breaks the contract of
     /// SCENE_FORMAT.md. `key` is the TOML key path (`shapes[2].vertices`) or `line N`.
     #[error("{file}: {key}: {message}")]
-    Scene {
-        file: PathBuf,
-        key: String,
-        message: String,
-    },
+    Scene { file: PathBuf, key: String, message: String },
     /// A command-line value or combination of options that cannot be honoured.
     #[error("{0}")]
     Usage(String),
@@ -39,24 +35,13 @@ pub enum Error {
 
 impl Error {
     /// Shorthand for a scene error.
-    pub fn scene(
-        file: impl Into<PathBuf>,
-        key: impl Into<String>,
-        message: impl Into<String>,
-    ) -> Self {
-        Error::Scene {
-            file: file.into(),
-            key: key.into(),
-            message: message.into(),
-        }
+    pub fn scene(file: impl Into<PathBuf>, key: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::Scene { file: file.into(), key: key.into(), message: message.into() }
     }
 
     /// Whether this error is the user's to fix before any work starts (exit status 2).
     pub fn is_usage(&self) -> bool {
-        matches!(
-            self,
-            Error::Scene { .. } | Error::Usage(_) | Error::Limits(_)
-        )
+        matches!(self, Error::Scene { .. } | Error::Usage(_) | Error::Limits(_))
     }
 }
 

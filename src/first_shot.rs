@@ -60,12 +60,7 @@ fn orthonormal_frame(n: DVec3) -> (DVec3, DVec3) {
 
 /// The faces around `sample` at `resolution` pixels per face edge, and the solid angle
 /// of a face's centre pixel (the same for all of them).
-fn faces(
-    sample: &LightSample,
-    window: LightWindow,
-    resolution: u32,
-    near: f64,
-) -> (Vec<Face>, f64) {
+fn faces(sample: &LightSample, window: LightWindow, resolution: u32, near: f64) -> (Vec<Face>, f64) {
     let view = |forward: DVec3, up: DVec3, tan: f64, centre: [f64; 2]| View {
         eye: sample.position,
         forward,
@@ -75,31 +70,14 @@ fn faces(
         size: [resolution, resolution],
         near,
     };
-    let full = |view: View| Face {
-        view,
-        rows: resolution,
-    };
+    let full = |view: View| Face { view, rows: resolution };
     let cube_pixel = 4.0 / (resolution as f64 * resolution as f64);
     match sample.normal {
         None => {
-            let axes = [
-                DVec3::X,
-                -DVec3::X,
-                DVec3::Y,
-                -DVec3::Y,
-                DVec3::Z,
-                -DVec3::Z,
-            ];
+            let axes = [DVec3::X, -DVec3::X, DVec3::Y, -DVec3::Y, DVec3::Z, -DVec3::Z];
             let faces = axes
                 .iter()
-                .map(|&a| {
-                    full(view(
-                        a,
-                        if a.y.abs() > 0.5 { DVec3::Z } else { DVec3::Y },
-                        1.0,
-                        [0.0, 0.0],
-                    ))
-                })
+                .map(|&a| full(view(a, if a.y.abs() > 0.5 { DVec3::Z } else { DVec3::Y }, 1.0, [0.0, 0.0])))
                 .collect();
             (faces, cube_pixel)
         }
@@ -111,10 +89,7 @@ fn faces(
                     // Side faces with the light's normal as their up: the top half of
                     // each lies above the light's plane.
                     for side in [t1, -t1, t2, -t2] {
-                        faces.push(Face {
-                            view: view(side, n, 1.0, [0.0, 0.0]),
-                            rows: resolution.div_ceil(2),
-                        });
+                        faces.push(Face { view: view(side, n, 1.0, [0.0, 0.0]), rows: resolution.div_ceil(2) });
                     }
                     (faces, cube_pixel)
                 }
@@ -165,8 +140,7 @@ pub fn run(
     }
     let n = buffers.patch_count as u64;
     let samples = patches.samples.len() as u64;
-    let max_pairs =
-        (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size) / 16;
+    let max_pairs = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size) / 16;
     // Every pair fits when each patch sees every sample; start there when that is small,
     // else grow on overflow below.
     let mut capacity = (n * samples).clamp(1, 1 << 22).min(max_pairs) as u32;
@@ -178,28 +152,14 @@ pub fn run(
         for (i, sample) in patches.samples.iter().enumerate() {
             let (faces, pixel) = faces(sample, window, resolution, near);
             for face in &faces {
-                ctx.queue.write_buffer(
-                    &item_buffer.camera,
-                    0,
-                    bytemuck::bytes_of(&face.view.gpu([0.5, 0.5])),
-                );
-                let params = GpuFaceParams {
-                    sample: i as u32,
-                    patch_count: buffers.patch_count,
-                    rows: face.rows,
-                    _pad: 0,
-                };
-                ctx.queue
-                    .write_buffer(&reduce.face_params, 0, bytemuck::bytes_of(&params));
+                ctx.queue.write_buffer(&item_buffer.camera, 0, bytemuck::bytes_of(&face.view.gpu([0.5, 0.5])));
+                let params =
+                    GpuFaceParams { sample: i as u32, patch_count: buffers.patch_count, rows: face.rows, _pad: 0 };
+                ctx.queue.write_buffer(&reduce.face_params, 0, bytemuck::bytes_of(&params));
                 let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("firstshot.first_shot.face"),
                 });
-                item_buffer.record_rows(
-                    &mut encoder,
-                    &buffers.vertices,
-                    buffers.patch_count,
-                    face.rows,
-                );
+                item_buffer.record_rows(&mut encoder, &buffers.vertices, buffers.patch_count, face.rows);
                 reduce.record_face(&mut encoder, face.rows);
                 ctx.queue.submit([encoder.finish()]);
                 face_count += 1;
@@ -218,11 +178,9 @@ pub fn run(
                 factor: factor as f32,
                 _pad1: [0; 3],
             };
-            ctx.queue
-                .write_buffer(&reduce.append_params, 0, bytemuck::bytes_of(&append));
-            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("firstshot.first_shot.append"),
-            });
+            ctx.queue.write_buffer(&reduce.append_params, 0, bytemuck::bytes_of(&append));
+            let mut encoder = device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.first_shot.append") });
             reduce.record_append(&mut encoder);
             ctx.queue.submit([encoder.finish()]);
         }
@@ -238,9 +196,8 @@ pub fn run(
             capacity = total;
             continue;
         }
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("firstshot.first_shot.table"),
-        });
+        let mut encoder = device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.first_shot.table") });
         let (table, _temporaries, _scan) = first_shot_table::build(
             device,
             &mut encoder,
@@ -266,29 +223,17 @@ pub fn run(
 /// The table read back: for every patch, its (sample, r_ij) pairs. For tests and tools.
 pub fn read_table(ctx: &Context, buffers: &SceneBuffers) -> Result<Vec<Vec<(u32, f32)>>> {
     let n = buffers.patch_count as usize;
-    let offsets: Vec<u32> = buffers::read_back(
-        &ctx.device,
-        &ctx.queue,
-        &buffers.first_shot.offsets,
-        4 * (n as u64 + 1),
-    )?;
+    let offsets: Vec<u32> =
+        buffers::read_back(&ctx.device, &ctx.queue, &buffers.first_shot.offsets, 4 * (n as u64 + 1))?;
     let count = buffers.first_shot.entry_count as u64;
     let entries: Vec<[u32; 2]> = if count == 0 {
         vec![]
     } else {
-        buffers::read_back(
-            &ctx.device,
-            &ctx.queue,
-            &buffers.first_shot.entries,
-            8 * count,
-        )?
+        buffers::read_back(&ctx.device, &ctx.queue, &buffers.first_shot.entries, 8 * count)?
     };
     Ok((0..n)
         .map(|j| {
-            entries[offsets[j] as usize..offsets[j + 1] as usize]
-                .iter()
-                .map(|e| (e[0], f32::from_bits(e[1])))
-                .collect()
+            entries[offsets[j] as usize..offsets[j + 1] as usize].iter().map(|e| (e[0], f32::from_bits(e[1]))).collect()
         })
         .collect())
 }

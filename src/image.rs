@@ -19,10 +19,7 @@ pub fn luminance(p: [f32; 3]) -> f64 {
 }
 
 fn io_error(path: &Path, source: std::io::Error) -> Error {
-    Error::Io {
-        path: path.to_path_buf(),
-        source,
-    }
+    Error::Io { path: path.to_path_buf(), source }
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same directory.
@@ -43,11 +40,7 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
 impl Image {
     pub fn new(width: u32, height: u32, pixels: Vec<[f32; 3]>) -> Self {
         assert_eq!(pixels.len(), width as usize * height as usize);
-        Image {
-            width,
-            height,
-            pixels,
-        }
+        Image { width, height, pixels }
     }
 
     pub fn at(&self, x: u32, y: u32) -> [f32; 3] {
@@ -64,20 +57,14 @@ impl Image {
         });
         let mut image = exr::image::Image::from_channels((w, self.height as usize), channels);
         for (key, value) in attributes {
-            image.attributes.other.insert(
-                Text::from(*key),
-                AttributeValue::Text(Text::from(value.as_str())),
-            );
+            image.attributes.other.insert(Text::from(*key), AttributeValue::Text(Text::from(value.as_str())));
         }
         let mut bytes = std::io::Cursor::new(Vec::new());
         image
             .write()
             .non_parallel()
             .to_buffered(&mut bytes)
-            .map_err(|e| crate::Error::Image {
-                path: PathBuf::from("<exr>"),
-                message: e.to_string(),
-            })?;
+            .map_err(|e| crate::Error::Image { path: PathBuf::from("<exr>"), message: e.to_string() })?;
         Ok(bytes.into_inner())
     }
 
@@ -100,22 +87,14 @@ impl Image {
                 img.pixels[pos.y() * w + pos.x()] = [r, g, b];
             },
         )
-        .map_err(|e| crate::Error::Image {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        .map_err(|e| crate::Error::Image { path: path.to_path_buf(), message: e.to_string() })?;
         Ok(image.layer_data.channel_data.pixels)
     }
 
     /// Exposure that maps the 97th percentile of luminance to 0.8, so that a few bright
     /// pixels (lights, highlights) clip instead of darkening the whole picture.
     pub fn auto_exposure(&self) -> f32 {
-        let mut lum: Vec<f64> = self
-            .pixels
-            .iter()
-            .map(|&p| luminance(p))
-            .filter(|l| l.is_finite())
-            .collect();
+        let mut lum: Vec<f64> = self.pixels.iter().map(|&p| luminance(p)).filter(|l| l.is_finite()).collect();
         if lum.is_empty() {
             return 1.0;
         }
@@ -127,32 +106,18 @@ impl Image {
     /// 8-bit sRGB PNG bytes of the image scaled by `exposure` and clipped.
     pub fn png_bytes(&self, exposure: f32) -> Result<Vec<u8>> {
         fn srgb(v: f32) -> u8 {
-            let v = if v.is_finite() {
-                v.clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let s = if v <= 0.003_130_8 {
-                12.92 * v
-            } else {
-                1.055 * v.powf(1.0 / 2.4) - 0.055
-            };
+            let v = if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 };
+            let s = if v <= 0.003_130_8 { 12.92 * v } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
             (s * 255.0 + 0.5) as u8
         }
-        let data: Vec<u8> = self
-            .pixels
-            .iter()
-            .flat_map(|p| p.map(|c| srgb(c * exposure)))
-            .collect();
+        let data: Vec<u8> = self.pixels.iter().flat_map(|p| p.map(|c| srgb(c * exposure))).collect();
         let mut bytes = Vec::new();
         {
             let mut encoder = png::Encoder::new(&mut bytes, self.width, self.height);
             encoder.set_color(png::ColorType::Rgb);
             encoder.set_depth(png::BitDepth::Eight);
-            let err = |e: png::EncodingError| crate::Error::Image {
-                path: PathBuf::from("<png>"),
-                message: e.to_string(),
-            };
+            let err =
+                |e: png::EncodingError| crate::Error::Image { path: PathBuf::from("<png>"), message: e.to_string() };
             let mut writer = encoder.write_header().map_err(err)?;
             writer.write_image_data(&data).map_err(err)?;
         }
@@ -179,11 +144,7 @@ impl Image {
                 pixels.push(s);
             }
         }
-        Image {
-            width: w,
-            height: h,
-            pixels,
-        }
+        Image { width: w, height: h, pixels }
     }
 
     /// Per-channel means.
@@ -247,11 +208,7 @@ pub fn image_error(image: &Image, reference: &Image) -> Result<ImageError> {
         }
     }
     Ok(ImageError {
-        relative_rmse: if ref2 > 0.0 {
-            (err2 / ref2).sqrt()
-        } else {
-            f64::NAN
-        },
+        relative_rmse: if ref2 > 0.0 { (err2 / ref2).sqrt() } else { f64::NAN },
         mean_ratio: [0, 1, 2].map(|c| sum_a[c] / sum_b[c]),
         pixels: count,
         mean: image.mean(),

@@ -136,6 +136,31 @@ pub struct GpuAppendParams {
     pub _pad1: [u32; 3],
 }
 
+/// One ray bundle: a global direction and the parallel projection grid around it.
+/// WGSL: `Bundle`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuBundle {
+    /// xyz: the bundle's direction d (unit); w: pixel area dP.
+    pub direction: [f32; 4],
+    /// xyz: grid axis u divided by the grid's half extent (clip x = dot(p - centre, u));
+    /// w: the grid's random sub-pixel shift in clip units.
+    pub axis_u: [f32; 4],
+    /// As `axis_u`, for the grid's y axis.
+    pub axis_v: [f32; 4],
+    /// xyz: centre of the scene's bounding sphere; w: 1 / radius.
+    pub centre: [f32; 4],
+    /// rgb: environment radiance.
+    pub environment: [f32; 4],
+    /// Pixels along each edge of the grid.
+    pub resolution: u32,
+    pub patch_count: u32,
+    /// Capacity of the fragment list.
+    pub capacity: u32,
+    /// 1 once the iteration state holds J (after step 1).
+    pub use_state: u32,
+}
+
 /// A vertex of the rasterised patch triangles: position and patch id (with
 /// `VERTEX_TWIN_BIT`). Only a vertex buffer, so it has no WGSL struct.
 #[repr(C)]
@@ -157,6 +182,7 @@ assert_size_multiple_of_16!(
     GpuEstimateParams,
     GpuFaceParams,
     GpuAppendParams,
+    GpuBundle,
     RasterVertex
 );
 
@@ -180,6 +206,7 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, use_state }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
         layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
+        layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state }),
     ]
 }
 

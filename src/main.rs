@@ -2,10 +2,10 @@
 
 use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
+use firstshot::first_shot::LightWindow;
 use firstshot::gpu::context::{AdapterChoice, Context, list_adapters};
 use firstshot::image::{Image, image_error};
 use firstshot::render::{RenderOptions, render};
-use firstshot::first_shot::LightWindow;
 use firstshot::scene;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -95,10 +95,7 @@ impl<E: Into<anyhow::Error>> From<E> for Failure {
 }
 
 fn usage(message: String) -> Failure {
-    Failure {
-        status: 2,
-        error: anyhow::anyhow!(message),
-    }
+    Failure { status: 2, error: anyhow::anyhow!(message) }
 }
 
 fn main() -> ExitCode {
@@ -130,18 +127,9 @@ fn compare(a: &Path, b: &Path) -> Result<(), Failure> {
         (e.mean_ratio[1] - 1.0) * 100.0,
         (e.mean_ratio[2] - 1.0) * 100.0
     );
-    println!(
-        "means of A         {:.5} {:.5} {:.5}",
-        e.mean[0], e.mean[1], e.mean[2]
-    );
-    println!(
-        "means of B         {:.5} {:.5} {:.5}",
-        e.reference_mean[0], e.reference_mean[1], e.reference_mean[2]
-    );
-    println!(
-        "pixels counted     {} (2x2 downsampled, lights left out)",
-        e.pixels
-    );
+    println!("means of A         {:.5} {:.5} {:.5}", e.mean[0], e.mean[1], e.mean[2]);
+    println!("means of B         {:.5} {:.5} {:.5}", e.reference_mean[0], e.reference_mean[1], e.reference_mean[2]);
+    println!("pixels counted     {} (2x2 downsampled, lights left out)", e.pixels);
     Ok(())
 }
 
@@ -197,16 +185,16 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     }
     if let Some(v) = args.patch_size {
         if !(v.is_finite() && v > 0.0) {
-            return Err(usage(format!(
-                "--patch-size {v}: expected a finite number > 0"
-            )));
+            return Err(usage(format!("--patch-size {v}: expected a finite number > 0")));
         }
         options.patch_size = v;
     }
     if let Some(v) = args.light_window {
         options.light_window = v;
     }
-    for (flag, v) in [("--width", args.width), ("--height", args.height), ("--hemicube-resolution", args.hemicube_resolution)] {
+    for (flag, v) in
+        [("--width", args.width), ("--height", args.height), ("--hemicube-resolution", args.hemicube_resolution)]
+    {
         if let Some(v) = v
             && !(1..=16384).contains(&v)
         {
@@ -217,11 +205,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     options.height = args.height.unwrap_or(options.height);
     options.hemicube_resolution = args.hemicube_resolution.unwrap_or(options.hemicube_resolution);
     let (exr_path, png_path) = output_paths(&args, &scene_path)?;
-    say(format!(
-        "loaded {} in {:.0} ms",
-        scene_path.display(),
-        start.elapsed().as_secs_f64() * 1e3
-    ));
+    say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
 
     let t = Instant::now();
     let patches = scene::tessellate(&scene, options.patch_size)?;
@@ -260,9 +244,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         ("firstshot.adapter", ctx.summary.to_string()),
     ];
     rendered.image.write_exr(&exr_path, &attributes)?;
-    rendered
-        .image
-        .write_png(&png_path, rendered.image.auto_exposure())?;
+    rendered.image.write_png(&png_path, rendered.image.auto_exposure())?;
     if let Some(stats) = &args.stats {
         let json = serde_json::to_string_pretty(&rendered.stats).context("encoding the stats")?;
         firstshot::image::write_atomically(stats, json.as_bytes())?;

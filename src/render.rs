@@ -1,11 +1,11 @@
 //! The order of the pipeline: tessellated scene on the GPU -> first shot -> iteration loop
 //! -> image. `main.rs` and the tests call `render`.
 
+use crate::first_shot::{self, LightWindow};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{AdapterSummary, Context};
 use crate::image::Image;
 use crate::layout::*;
-use crate::first_shot::{self, LightWindow};
 use crate::rng::StepRng;
 use crate::scene::{Patches, Scene};
 use crate::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
@@ -78,11 +78,7 @@ pub struct Rendered {
 }
 
 /// Checks, before any GPU work, that the scene and image fit the device's limits.
-pub fn check_limits(
-    limits: &wgpu::Limits,
-    patches: &Patches,
-    options: &RenderOptions,
-) -> Result<()> {
+pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOptions) -> Result<()> {
     let binding = limits.max_storage_buffer_binding_size as u64;
     let buffer = limits.max_buffer_size;
     let fit = |what: &str, bytes: u64, hint: &str| -> Result<()> {
@@ -97,26 +93,12 @@ pub fn check_limits(
     };
     let n = patches.patches.len() as u64;
     if n > MAX_PATCHES as u64 {
-        return Err(Error::Limits(format!(
-            "{n} patches exceed the limit of {MAX_PATCHES}; use a larger --patch-size"
-        )));
+        return Err(Error::Limits(format!("{n} patches exceed the limit of {MAX_PATCHES}; use a larger --patch-size")));
     }
     let fewer = "use a larger --patch-size or a GPU with more memory";
-    fit(
-        "the patch table",
-        n * std::mem::size_of::<GpuPatch>() as u64,
-        fewer,
-    )?;
-    fit(
-        "the rasterised triangles",
-        n * 3 * std::mem::size_of::<RasterVertex>() as u64,
-        fewer,
-    )?;
-    fit(
-        "the iteration state",
-        n * std::mem::size_of::<GpuPatchState>() as u64,
-        fewer,
-    )?;
+    fit("the patch table", n * std::mem::size_of::<GpuPatch>() as u64, fewer)?;
+    fit("the rasterised triangles", n * 3 * std::mem::size_of::<RasterVertex>() as u64, fewer)?;
+    fit("the iteration state", n * std::mem::size_of::<GpuPatchState>() as u64, fewer)?;
     let max_dim = limits.max_texture_dimension_2d;
     if options.width > max_dim || options.height > max_dim {
         return Err(Error::Limits(format!(
@@ -124,11 +106,7 @@ pub fn check_limits(
             options.width, options.height
         )));
     }
-    fit(
-        "the image",
-        options.width as u64 * options.height as u64 * 16,
-        "use a smaller --width/--height",
-    )?;
+    fit("the image", options.width as u64 * options.height as u64 * 16, "use a smaller --width/--height")?;
     Ok(())
 }
 
@@ -137,12 +115,7 @@ fn milliseconds(since: Instant) -> f64 {
 }
 
 /// Renders `scene` (already tessellated into `patches`) on `ctx`.
-pub fn render(
-    ctx: &Context,
-    scene: &Scene,
-    patches: &Patches,
-    options: &RenderOptions,
-) -> Result<Rendered> {
+pub fn render(ctx: &Context, scene: &Scene, patches: &Patches, options: &RenderOptions) -> Result<Rendered> {
     let start = Instant::now();
     check_limits(&ctx.limits(), patches, options)?;
     if options.iterations > 0 {
@@ -168,12 +141,7 @@ pub fn render(
         &estimate.params,
         0,
         bytemuck::bytes_of(&GpuEstimateParams {
-            environment: [
-                scene.environment[0],
-                scene.environment[1],
-                scene.environment[2],
-                0.0,
-            ],
+            environment: [scene.environment[0], scene.environment[1], scene.environment[2], 0.0],
             patch_count: buffers.patch_count,
             use_state: 0,
             _pad: [0; 2],
@@ -189,18 +157,10 @@ pub fn render(
             ((k % per_axis) as f64 + rng.uniform()) / per_axis as f64,
             ((k / per_axis) as f64 + rng.uniform()) / per_axis as f64,
         ];
-        let cam = gpu_camera(
-            &scene.camera,
-            options.width,
-            options.height,
-            near,
-            [jitter[0] as f32, jitter[1] as f32],
-        );
-        ctx.queue
-            .write_buffer(&camera.camera, 0, bytemuck::bytes_of(&cam));
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("firstshot.render.direct_image"),
-        });
+        let cam = gpu_camera(&scene.camera, options.width, options.height, near, [jitter[0] as f32, jitter[1] as f32]);
+        ctx.queue.write_buffer(&camera.camera, 0, bytemuck::bytes_of(&cam));
+        let mut encoder = device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.direct_image") });
         camera.record(&mut encoder, &buffers.vertices, buffers.patch_count);
         estimate.record(&mut encoder);
         ctx.queue.submit([encoder.finish()]);

@@ -33,14 +33,7 @@ fn patch(v: [DVec3; 3], emission: [f32; 3], twin: bool) -> Patch {
 }
 
 fn camera(position: DVec3, width: u32, height: u32) -> Camera {
-    Camera {
-        position,
-        look_at: DVec3::ZERO,
-        up: DVec3::Y,
-        fov_y: 40.0,
-        width,
-        height,
-    }
+    Camera { position, look_at: DVec3::ZERO, up: DVec3::Y, fov_y: 40.0, width, height }
 }
 
 /// Screen position in pixels (x right, y down) of a scene point, from the camera contract.
@@ -53,21 +46,13 @@ fn project(cam: &Camera, p: DVec3) -> DVec2 {
     let tan_y = (cam.fov_y.to_radians() / 2.0).tan();
     let tan_x = tan_y * cam.width as f64 / cam.height as f64;
     let ndc = DVec2::new(rel.dot(right) / z / tan_x, rel.dot(up) / z / tan_y);
-    DVec2::new(
-        (ndc.x + 1.0) / 2.0 * cam.width as f64,
-        (1.0 - ndc.y) / 2.0 * cam.height as f64,
-    )
+    DVec2::new((ndc.x + 1.0) / 2.0 * cam.width as f64, (1.0 - ndc.y) / 2.0 * cam.height as f64)
 }
 
 /// Area of a convex polygon clipped to the unit pixel square at (x, y) (Sutherland-Hodgman).
 fn covered(poly: &[DVec2], x: f64, y: f64) -> f64 {
     let mut pts = poly.to_vec();
-    let planes: [(DVec2, f64); 4] = [
-        (DVec2::X, x),
-        (-DVec2::X, -(x + 1.0)),
-        (DVec2::Y, y),
-        (-DVec2::Y, -(y + 1.0)),
-    ];
+    let planes: [(DVec2, f64); 4] = [(DVec2::X, x), (-DVec2::X, -(x + 1.0)), (DVec2::Y, y), (-DVec2::Y, -(y + 1.0))];
     for (n, d) in planes {
         let inside = |p: DVec2| p.dot(n) >= d;
         let mut out = Vec::new();
@@ -98,22 +83,12 @@ fn emitting_triangle_covers_exactly_its_projection() {
     let Some(ctx) = common::gpu() else { return };
     let cam = camera(DVec3::new(0.3, 0.2, -5.0), 64, 48);
     // Counter-clockwise seen from the camera (front normal toward -z).
-    let v = [
-        DVec3::new(1.2, -0.9, 0.0),
-        DVec3::new(-1.1, -0.4, 0.0),
-        DVec3::new(0.2, 1.0, 0.5),
-    ];
+    let v = [DVec3::new(1.2, -0.9, 0.0), DVec3::new(-1.1, -0.4, 0.0), DVec3::new(0.2, 1.0, 0.5)];
     let tri = patch(v, [1.0, 2.0, 3.0], false);
-    assert!(
-        tri.normal.dot(cam.position - v[0]) > 0.0,
-        "test triangle must face the camera"
-    );
+    assert!(tri.normal.dot(cam.position - v[0]) > 0.0, "test triangle must face the camera");
     let env = [0.25, 0.5, 0.125];
     let sc = scene(cam, env);
-    let patches = Patches {
-        patches: vec![tri],
-        samples: vec![],
-    };
+    let patches = Patches { patches: vec![tri], samples: vec![] };
     let mut options = RenderOptions::from_scene(&sc);
     options.iterations = 0;
     let image = render(&ctx, &sc, &patches, &options).unwrap().image;
@@ -156,44 +131,22 @@ fn emitting_triangle_covers_exactly_its_projection() {
 #[test]
 fn back_faces_are_black_and_twins_show_the_front_one() {
     let Some(ctx) = common::gpu() else { return };
-    let v = [
-        DVec3::new(2.0, -2.0, 0.0),
-        DVec3::new(-2.0, -2.0, 0.0),
-        DVec3::new(0.0, 2.0, 0.0),
-    ];
+    let v = [DVec3::new(2.0, -2.0, 0.0), DVec3::new(-2.0, -2.0, 0.0), DVec3::new(0.0, 2.0, 0.0)];
     let front = patch(v, [1.0, 1.0, 1.0], true);
     let back = patch([v[0], v[2], v[1]], [5.0, 5.0, 5.0], true);
     let lone_back = patch([v[0], v[2], v[1]], [5.0, 5.0, 5.0], false);
     let env = [0.5; 3];
     let centre_of = |pos: DVec3, ps: Vec<Patch>| {
         let sc = scene(camera(pos, 16, 16), env);
-        let patches = Patches {
-            patches: ps,
-            samples: vec![],
-        };
+        let patches = Patches { patches: ps, samples: vec![] };
         let mut options = RenderOptions::from_scene(&sc);
         options.iterations = 0;
-        render(&ctx, &sc, &patches, &options)
-            .unwrap()
-            .image
-            .at(8, 8)
+        render(&ctx, &sc, &patches, &options).unwrap().image.at(8, 8)
     };
     // The front of `front` faces -z.
-    assert_eq!(
-        centre_of(DVec3::new(0.0, 0.0, -5.0), vec![front, back]),
-        [1.0; 3]
-    );
-    assert_eq!(
-        centre_of(DVec3::new(0.0, 0.0, -5.0), vec![back, front]),
-        [1.0; 3]
-    );
-    assert_eq!(
-        centre_of(DVec3::new(0.0, 0.0, 5.0), vec![front, back]),
-        [5.0; 3]
-    );
+    assert_eq!(centre_of(DVec3::new(0.0, 0.0, -5.0), vec![front, back]), [1.0; 3]);
+    assert_eq!(centre_of(DVec3::new(0.0, 0.0, -5.0), vec![back, front]), [1.0; 3]);
+    assert_eq!(centre_of(DVec3::new(0.0, 0.0, 5.0), vec![front, back]), [5.0; 3]);
     // A one-sided patch seen from behind occludes and is black.
-    assert_eq!(
-        centre_of(DVec3::new(0.0, 0.0, -5.0), vec![lone_back]),
-        [0.0; 3]
-    );
+    assert_eq!(centre_of(DVec3::new(0.0, 0.0, -5.0), vec![lone_back]), [0.0; 3]);
 }

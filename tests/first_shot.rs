@@ -9,11 +9,7 @@ use glam::DVec3;
 use std::f64::consts::PI;
 
 /// r_ij of a point light times 4 pi A_j: the solid angle the patch covers, as measured.
-fn measured_solid_angle(
-    table: &[Vec<(u32, f32)>],
-    patches: &firstshot::scene::Patches,
-    j: usize,
-) -> f64 {
+fn measured_solid_angle(table: &[Vec<(u32, f32)>], patches: &firstshot::scene::Patches, j: usize) -> f64 {
     table[j].iter().map(|&(_, r)| r as f64).sum::<f64>() * 4.0 * PI * patches.patches[j].area
 }
 
@@ -24,21 +20,9 @@ fn test01_unoccluded_triangle_matches_its_solid_angle() {
     // One triangle inside a face, one across the seam of two faces and one across a
     // corner of three; each covers a few thousand pixels at 512.
     let tris = [
-        [
-            DVec3::new(0.9, 0.1, 0.0),
-            DVec3::new(1.0, 0.0, 0.3),
-            DVec3::new(1.1, -0.25, -0.05),
-        ],
-        [
-            DVec3::new(0.35, 0.9, 0.5),
-            DVec3::new(0.6, 0.95, 0.75),
-            DVec3::new(0.75, 0.8, 0.3),
-        ],
-        [
-            DVec3::new(-0.95, -0.75, 0.75),
-            DVec3::new(-0.7, -1.0, 0.8),
-            DVec3::new(-0.8, -0.9, 1.1),
-        ],
+        [DVec3::new(0.9, 0.1, 0.0), DVec3::new(1.0, 0.0, 0.3), DVec3::new(1.1, -0.25, -0.05)],
+        [DVec3::new(0.35, 0.9, 0.5), DVec3::new(0.6, 0.95, 0.75), DVec3::new(0.75, 0.8, 0.3)],
+        [DVec3::new(-0.95, -0.75, 0.75), DVec3::new(-0.7, -1.0, 0.8), DVec3::new(-0.8, -0.9, 1.1)],
     ]
     .map(|t| t.map(|v| v + light));
     // Turn each to face the light.
@@ -46,11 +30,7 @@ fn test01_unoccluded_triangle_matches_its_solid_angle() {
         .iter()
         .map(|t| {
             let n = (t[1] - t[0]).cross(t[2] - t[0]);
-            if n.dot(light - t[0]) > 0.0 {
-                *t
-            } else {
-                [t[0], t[2], t[1]]
-            }
+            if n.dot(light - t[0]) > 0.0 { *t } else { [t[0], t[2], t[1]] }
         })
         .collect();
     let patches = patches_of(&tris, vec![point_sample(light)]);
@@ -60,10 +40,7 @@ fn test01_unoccluded_triangle_matches_its_solid_angle() {
         let worst = (0..tris.len())
             .map(|j| {
                 let exact = solid_angle(light, tris[j]);
-                eprintln!(
-                    "  triangle {j}: exact {exact:.6} measured {:.6}",
-                    measured_solid_angle(&table, &patches, j)
-                );
+                eprintln!("  triangle {j}: exact {exact:.6} measured {:.6}", measured_solid_angle(&table, &patches, j));
                 (measured_solid_angle(&table, &patches, j) - exact).abs() / exact
             })
             .fold(0.0, f64::max);
@@ -72,39 +49,27 @@ fn test01_unoccluded_triangle_matches_its_solid_angle() {
     }
     // DESIGN.md: 1% at 512 for triangles of a few hundred pixels, error of order 1/R.
     assert!(errors[3] < 0.01, "error at 512: {}", errors[3]);
-    assert!(
-        errors[4] < errors[1] / 2.0,
-        "error does not shrink with resolution: {errors:?}"
-    );
+    assert!(errors[4] < errors[1] / 2.0, "error does not shrink with resolution: {errors:?}");
 }
 
 #[test]
 fn test02_point_light_in_a_closed_room_sees_every_direction() {
     let Some(ctx) = gpu() else { return };
-    let tris: Vec<_> = room(DVec3::new(-1.0, -0.7, -1.3), DVec3::new(1.5, 1.1, 0.9))
-        .into_iter()
-        .flat_map(|t| split(t, 4))
-        .collect();
+    let tris: Vec<_> =
+        room(DVec3::new(-1.0, -0.7, -1.3), DVec3::new(1.5, 1.1, 0.9)).into_iter().flat_map(|t| split(t, 4)).collect();
     let patches = patches_of(&tris, vec![point_sample(DVec3::new(0.2, 0.1, -0.3))]);
     let table = first_shot_table(&ctx, &patches, 256, LightWindow::Hemicube);
-    let total: f64 = (0..tris.len())
-        .map(|j| measured_solid_angle(&table, &patches, j))
-        .sum();
+    let total: f64 = (0..tris.len()).map(|j| measured_solid_angle(&table, &patches, j)).sum();
     // The sum of (4 / R^2) cos^3 over a face is its solid angle up to the midpoint rule's
     // O(1/R^2) error, far below 1e-4 at R = 256.
-    assert!(
-        (total / (4.0 * PI) - 1.0).abs() < 1e-4,
-        "4 pi sum r A = {total}, expected 4 pi"
-    );
+    assert!((total / (4.0 * PI) - 1.0).abs() < 1e-4, "4 pi sum r A = {total}, expected 4 pi");
 }
 
 #[test]
 fn test03_area_light_vertex_in_a_closed_room_integrates_the_cosine() {
     let Some(ctx) = gpu() else { return };
-    let tris: Vec<_> = room(DVec3::new(-1.0, -0.7, -1.3), DVec3::new(1.5, 1.1, 0.9))
-        .into_iter()
-        .flat_map(|t| split(t, 3))
-        .collect();
+    let tris: Vec<_> =
+        room(DVec3::new(-1.0, -0.7, -1.3), DVec3::new(1.5, 1.1, 0.9)).into_iter().flat_map(|t| split(t, 3)).collect();
     let normal = DVec3::new(0.3, -1.0, 0.2).normalize();
     let weight = 0.37;
     let sample = firstshot::scene::LightSample {
@@ -118,15 +83,9 @@ fn test03_area_light_vertex_in_a_closed_room_integrates_the_cosine() {
     for window in [LightWindow::Hemicube, LightWindow::Tetrahedron] {
         let table = first_shot_table(&ctx, &patches, 256, window);
         let total: f64 = (0..tris.len())
-            .map(|j| {
-                table[j].iter().map(|&(_, r)| r as f64).sum::<f64>() * patches.patches[j].area
-                    / weight
-            })
+            .map(|j| table[j].iter().map(|&(_, r)| r as f64).sum::<f64>() * patches.patches[j].area / weight)
             .sum();
-        assert!(
-            (total / PI - 1.0).abs() < 1e-3,
-            "{window:?}: sum of cos dOmega = {total}, expected pi"
-        );
+        assert!((total / PI - 1.0).abs() < 1e-3, "{window:?}: sum of cos dOmega = {total}, expected pi");
     }
 }
 
@@ -154,27 +113,11 @@ fn test04_partly_shadowed_receiver_matches_a_cpu_ray_caster() {
     let light = DVec3::new(0.0, 2.0, 0.0);
     // A floor facing up, split into patches, and a tilted occluder between it and the light.
     let floor = [
-        [
-            DVec3::new(-1.0, 0.0, -1.0),
-            DVec3::new(-1.0, 0.0, 1.0),
-            DVec3::new(1.0, 0.0, 1.0),
-        ],
-        [
-            DVec3::new(-1.0, 0.0, -1.0),
-            DVec3::new(1.0, 0.0, 1.0),
-            DVec3::new(1.0, 0.0, -1.0),
-        ],
+        [DVec3::new(-1.0, 0.0, -1.0), DVec3::new(-1.0, 0.0, 1.0), DVec3::new(1.0, 0.0, 1.0)],
+        [DVec3::new(-1.0, 0.0, -1.0), DVec3::new(1.0, 0.0, 1.0), DVec3::new(1.0, 0.0, -1.0)],
     ];
-    let occluder = [
-        DVec3::new(-0.5, 1.0, -0.3),
-        DVec3::new(0.6, 1.1, 0.1),
-        DVec3::new(-0.1, 0.9, 0.7),
-    ];
-    let occluder = if (occluder[1] - occluder[0])
-        .cross(occluder[2] - occluder[0])
-        .y
-        < 0.0
-    {
+    let occluder = [DVec3::new(-0.5, 1.0, -0.3), DVec3::new(0.6, 1.1, 0.1), DVec3::new(-0.1, 0.9, 0.7)];
+    let occluder = if (occluder[1] - occluder[0]).cross(occluder[2] - occluder[0]).y < 0.0 {
         occluder
     } else {
         [occluder[0], occluder[2], occluder[1]]
@@ -213,8 +156,5 @@ fn test04_partly_shadowed_receiver_matches_a_cpu_ray_caster() {
             checked += 1;
         }
     }
-    assert!(
-        checked >= 2,
-        "the occluder must put some patches in partial shadow, got {checked}"
-    );
+    assert!(checked >= 2, "the occluder must put some patches in partial shadow, got {checked}");
 }

@@ -42,10 +42,7 @@ fn layout_sync_with_wgsl() {
         let naga::TypeInner::Struct { members, span } = &ty.inner else {
             panic!("{name} is not a struct in WGSL");
         };
-        assert_eq!(
-            *span as usize, size,
-            "size of {name}: WGSL {span}, Rust {size}"
-        );
+        assert_eq!(*span as usize, size, "size of {name}: WGSL {span}, Rust {size}");
         for (field, offset) in fields {
             let member = members
                 .iter()

@@ -11,10 +11,8 @@
 //   3 patches       array<Patch>              read
 //   4 materials     array<Material>           read
 //   5 state         array<PatchState>         read
-//   6 fs_offsets    array<u32>                read (first shot CSR row starts, patch_count + 1)
-//   7 fs_entries    array<vec2<u32>>          read (x: light sample, y: bits of r_ij)
-//   8 samples       array<LightSample>        read
-//   9 image_sum     array<vec4<f32>>          read_write (one pixel per invocation: no race)
+//   6 image_sum     array<vec4<f32>>          read_write (one pixel per invocation: no race)
+// Group 1: the first-shot table (wgsl/common/first_shot_table.wgsl).
 // Host: src/stages/image_estimate.rs.
 
 @group(0) @binding(0) var<uniform> camera: Camera;
@@ -23,22 +21,7 @@
 @group(0) @binding(3) var<storage, read> patches: array<Patch>;
 @group(0) @binding(4) var<storage, read> materials: array<Material>;
 @group(0) @binding(5) var<storage, read> state: array<PatchState>;
-@group(0) @binding(6) var<storage, read> fs_offsets: array<u32>;
-@group(0) @binding(7) var<storage, read> fs_entries: array<vec2<u32>>;
-@group(0) @binding(8) var<storage, read> samples: array<LightSample>;
-@group(0) @binding(9) var<storage, read_write> image_sum: array<vec4<f32>>;
-
-// Reflected first-shot radiance of patch j at x toward w_out: sum_i S_i r_ij f(w'_i(x), w_out).
-fn first_shot_radiance(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
-    var sum = vec3<f32>(0.0);
-    for (var e = fs_offsets[j]; e < fs_offsets[j + 1u]; e++) {
-        let entry = fs_entries[e];
-        let s = samples[entry.x];
-        let w_in = normalize(s.position.xyz - x);
-        sum += s.strength.rgb * bitcast<f32>(entry.y) * brdf(m, n, w_in, w_out);
-    }
-    return sum;
-}
+@group(0) @binding(6) var<storage, read_write> image_sum: array<vec4<f32>>;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {

@@ -25,12 +25,7 @@ pub fn storage_init<T: bytemuck::Pod>(
 }
 
 /// A zeroed storage buffer of `size` bytes (rounded up to 16).
-pub fn storage_zeroed(
-    device: &wgpu::Device,
-    label: &str,
-    size: u64,
-    extra: wgpu::BufferUsages,
-) -> wgpu::Buffer {
+pub fn storage_zeroed(device: &wgpu::Device, label: &str, size: u64, extra: wgpu::BufferUsages) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: size.max(16).next_multiple_of(16),
@@ -62,9 +57,8 @@ pub fn read_back<T: bytemuck::Pod>(
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-        label: Some("firstshot.readback"),
-    });
+    let mut encoder =
+        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.readback") });
     encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
     queue.submit([encoder.finish()]);
     let slice = staging.slice(..size);
@@ -72,19 +66,12 @@ pub fn read_back<T: bytemuck::Pod>(
     slice.map_async(wgpu::MapMode::Read, move |r| {
         let _ = tx.send(r);
     });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| Error::Gpu(format!("read-back: {e}")))?;
-    rx.recv()
-        .map_err(|e| Error::Gpu(format!("read-back: {e}")))?
-        .map_err(|e| Error::Gpu(format!("read-back: {e}")))?;
-    let data = slice
-        .get_mapped_range()
-        .map_err(|e| Error::Gpu(format!("read-back: {e}")))?;
-    let out = bytemuck::cast_slice::<u8, T>(
-        &data[..(size as usize / std::mem::size_of::<T>()) * std::mem::size_of::<T>()],
-    )
-    .to_vec();
+    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| Error::Gpu(format!("read-back: {e}")))?;
+    rx.recv().map_err(|e| Error::Gpu(format!("read-back: {e}")))?.map_err(|e| Error::Gpu(format!("read-back: {e}")))?;
+    let data = slice.get_mapped_range().map_err(|e| Error::Gpu(format!("read-back: {e}")))?;
+    let out =
+        bytemuck::cast_slice::<u8, T>(&data[..(size as usize / std::mem::size_of::<T>()) * std::mem::size_of::<T>()])
+            .to_vec();
     drop(data);
     staging.unmap();
     Ok(out)
@@ -105,10 +92,7 @@ pub fn storage_entry(binding: u32, read_only: bool, min_size: u64) -> wgpu::Bind
 }
 
 /// Bind-group layout entry for a uniform buffer of `T`.
-pub fn uniform_entry<T>(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-) -> wgpu::BindGroupLayoutEntry {
+pub fn uniform_entry<T>(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility,

@@ -52,9 +52,7 @@ impl AdapterSummary {
                 wgpu::DeviceType::Other => "Other",
             }
             .to_string(),
-            driver: format!("{} {}", info.driver, info.driver_info)
-                .trim()
-                .to_string(),
+            driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
         }
     }
 }
@@ -102,10 +100,7 @@ fn preference(info: &wgpu::AdapterInfo) -> (u8, u8) {
 
 /// Every adapter wgpu finds, in the order `auto` prefers them.
 pub fn list_adapters() -> Vec<AdapterSummary> {
-    sorted_adapters(&instance())
-        .iter()
-        .map(|a| AdapterSummary::of(&a.get_info()))
-        .collect()
+    sorted_adapters(&instance()).iter().map(|a| AdapterSummary::of(&a.get_info())).collect()
 }
 
 fn sorted_adapters(instance: &wgpu::Instance) -> Vec<wgpu::Adapter> {
@@ -120,9 +115,7 @@ fn matches(choice: &AdapterChoice, info: &wgpu::AdapterInfo) -> bool {
         AdapterChoice::Cpu => info.device_type == wgpu::DeviceType::Cpu,
         AdapterChoice::Gpu => matches!(
             info.device_type,
-            wgpu::DeviceType::DiscreteGpu
-                | wgpu::DeviceType::IntegratedGpu
-                | wgpu::DeviceType::VirtualGpu
+            wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu | wgpu::DeviceType::VirtualGpu
         ),
         AdapterChoice::Name(part) => info.name.to_lowercase().contains(&part.to_lowercase()),
     }
@@ -134,15 +127,9 @@ impl Context {
     pub fn new(choice: &AdapterChoice) -> Result<Context> {
         let instance = instance();
         let adapters = sorted_adapters(&instance);
-        let found: Vec<String> = adapters
-            .iter()
-            .map(|a| AdapterSummary::of(&a.get_info()).to_string())
-            .collect();
+        let found: Vec<String> = adapters.iter().map(|a| AdapterSummary::of(&a.get_info()).to_string()).collect();
         let mut failures = Vec::new();
-        for adapter in adapters
-            .into_iter()
-            .filter(|a| matches(choice, &a.get_info()))
-        {
+        for adapter in adapters.into_iter().filter(|a| matches(choice, &a.get_info())) {
             let summary = AdapterSummary::of(&adapter.get_info());
             let desc = wgpu::DeviceDescriptor {
                 label: Some("firstshot.device"),
@@ -152,12 +139,7 @@ impl Context {
             };
             match pollster::block_on(adapter.request_device(&desc)) {
                 Ok((device, queue)) => {
-                    return Ok(Context {
-                        adapter,
-                        device,
-                        queue,
-                        summary,
-                    });
+                    return Ok(Context { adapter, device, queue, summary });
                 }
                 Err(e) => failures.push(format!("{summary}: {e}")),
             }

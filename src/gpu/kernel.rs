@@ -5,36 +5,28 @@ use crate::layout;
 
 /// Shared WGSL, prepended to every kernel in this order.
 const COMMON: &[(&str, &str)] = &[
-    (
-        "common/layout.wgsl",
-        include_str!("../../wgsl/common/layout.wgsl"),
-    ),
-    (
-        "common/brdf.wgsl",
-        include_str!("../../wgsl/common/brdf.wgsl"),
-    ),
+    ("common/layout.wgsl", include_str!("../../wgsl/common/layout.wgsl")),
+    ("common/brdf.wgsl", include_str!("../../wgsl/common/brdf.wgsl")),
 ];
+
+/// Shared WGSL that declares bindings (group 1), prepended only to the kernels that use it.
+const FIRST_SHOT_TABLE: &str = include_str!("../../wgsl/common/first_shot_table.wgsl");
+
+/// Kernels that evaluate the first-shot radiance and so bind the table as group 1.
+const USES_FIRST_SHOT_TABLE: &[&str] = &["image_estimate", "bundle_reflect"];
 
 /// Every kernel of the pipeline, by stem (`wgsl/<stem>.wgsl`, `src/stages/<stem>.rs`).
 pub const KERNELS: &[(&str, &str)] = &[
-    (
-        "camera_item_buffer",
-        include_str!("../../wgsl/camera_item_buffer.wgsl"),
-    ),
-    (
-        "image_estimate",
-        include_str!("../../wgsl/image_estimate.wgsl"),
-    ),
+    ("camera_item_buffer", include_str!("../../wgsl/camera_item_buffer.wgsl")),
+    ("image_estimate", include_str!("../../wgsl/image_estimate.wgsl")),
     ("brdf_probe", include_str!("../../wgsl/brdf_probe.wgsl")),
+    ("bundle_reflect", include_str!("../../wgsl/bundle_reflect.wgsl")),
+    ("bundle_visibility", include_str!("../../wgsl/bundle_visibility.wgsl")),
+    ("bundle_transfer", include_str!("../../wgsl/bundle_transfer.wgsl")),
+    ("bundle_finalize", include_str!("../../wgsl/bundle_finalize.wgsl")),
     ("prefix_sum", include_str!("../../wgsl/prefix_sum.wgsl")),
-    (
-        "first_shot_reduce",
-        include_str!("../../wgsl/first_shot_reduce.wgsl"),
-    ),
-    (
-        "first_shot_table",
-        include_str!("../../wgsl/first_shot_table.wgsl"),
-    ),
+    ("first_shot_reduce", include_str!("../../wgsl/first_shot_reduce.wgsl")),
+    ("first_shot_table", include_str!("../../wgsl/first_shot_table.wgsl")),
 ];
 
 /// The full source of one kernel: generated header, common files, the kernel itself.
@@ -49,6 +41,10 @@ pub fn source(stem: &str) -> String {
     for (name, src) in COMMON {
         out.push_str(&format!("\n// ---- {name}\n"));
         out.push_str(src);
+    }
+    if USES_FIRST_SHOT_TABLE.contains(&stem) {
+        out.push_str("\n// ---- common/first_shot_table.wgsl\n");
+        out.push_str(FIRST_SHOT_TABLE);
     }
     out.push_str(&format!("\n// ---- {stem}.wgsl\n"));
     out.push_str(body);
@@ -67,12 +63,9 @@ pub fn module(device: &wgpu::Device, stem: &str) -> wgpu::ShaderModule {
 pub fn validate(stem: &str) -> std::result::Result<naga::Module, String> {
     let src = source(stem);
     let module = naga::front::wgsl::parse_str(&src).map_err(|e| e.emit_to_string(&src))?;
-    naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::empty(),
-    )
-    .validate(&module)
-    .map_err(|e| e.emit_to_string(&src))?;
+    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+        .validate(&module)
+        .map_err(|e| e.emit_to_string(&src))?;
     Ok(module)
 }
 

@@ -30,15 +30,10 @@ pub fn gpu_materials(scene: &Scene) -> Vec<GpuMaterial> {
         .materials
         .iter()
         .map(|m| match m.kind {
-            MaterialKind::Diffuse { albedo } => GpuMaterial {
-                diffuse: [albedo[0], albedo[1], albedo[2], 0.0],
-                specular: [0.0; 4],
-            },
-            MaterialKind::Phong {
-                diffuse,
-                specular,
-                shininess,
-            } => GpuMaterial {
+            MaterialKind::Diffuse { albedo } => {
+                GpuMaterial { diffuse: [albedo[0], albedo[1], albedo[2], 0.0], specular: [0.0; 4] }
+            }
+            MaterialKind::Phong { diffuse, specular, shininess } => GpuMaterial {
                 diffuse: [diffuse[0], diffuse[1], diffuse[2], 0.0],
                 specular: [specular[0], specular[1], specular[2], shininess],
             },
@@ -87,10 +82,7 @@ pub fn raster_vertices(patches: &Patches) -> Vec<RasterVertex> {
     for (i, p) in patches.patches.iter().enumerate() {
         let id = i as u32 | if p.twin { VERTEX_TWIN_BIT } else { 0 };
         for v in p.vertices {
-            out.push(RasterVertex {
-                position: [v.x as f32, v.y as f32, v.z as f32],
-                patch: id,
-            });
+            out.push(RasterVertex { position: [v.x as f32, v.y as f32, v.z as f32], patch: id });
         }
     }
     out
@@ -111,15 +103,8 @@ pub fn gpu_samples(patches: &Patches) -> Vec<GpuLightSample> {
 
 /// Bounding sphere (centre of the bounding box) of the patches and light samples.
 pub fn bounding_sphere(patches: &Patches) -> (DVec3, f64) {
-    let points = patches
-        .patches
-        .iter()
-        .flat_map(|p| p.vertices)
-        .chain(patches.samples.iter().map(|s| s.position));
-    let (lo, hi) = points.fold(
-        (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)),
-        |(lo, hi), v| (lo.min(v), hi.max(v)),
-    );
+    let points = patches.patches.iter().flat_map(|p| p.vertices).chain(patches.samples.iter().map(|s| s.position));
+    let (lo, hi) = points.fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(lo, hi), v| (lo.min(v), hi.max(v)));
     if lo.x > hi.x {
         return (DVec3::ZERO, 1.0);
     }
@@ -135,12 +120,7 @@ pub fn bounding_sphere(patches: &Patches) -> (DVec3, f64) {
 }
 
 impl SceneBuffers {
-    pub fn new(
-        device: &wgpu::Device,
-        scene: &Scene,
-        patches: &Patches,
-        first_shot: bool,
-    ) -> SceneBuffers {
+    pub fn new(device: &wgpu::Device, scene: &Scene, patches: &Patches, first_shot: bool) -> SceneBuffers {
         let gpu = gpu_patches(scene, patches, first_shot);
         let samples = gpu_samples(patches);
         let (centre, radius) = bounding_sphere(patches);
@@ -148,12 +128,7 @@ impl SceneBuffers {
         SceneBuffers {
             patch_count: gpu.len() as u32,
             patches: buffers::storage_init(device, "firstshot.scene.patches", &gpu, none),
-            materials: buffers::storage_init(
-                device,
-                "firstshot.scene.materials",
-                &gpu_materials(scene),
-                none,
-            ),
+            materials: buffers::storage_init(device, "firstshot.scene.materials", &gpu_materials(scene), none),
             samples: buffers::storage_init(device, "firstshot.scene.light_samples", &samples, none),
             sample_count: samples.len() as u32,
             vertices: buffers::storage_init(
@@ -189,6 +164,36 @@ pub struct FirstShotTable {
 }
 
 impl FirstShotTable {
+    /// Bind group 1 of the kernels that evaluate first-shot radiance
+    /// (`wgsl/common/first_shot_table.wgsl`).
+    pub fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("firstshot.first_shot_table.layout"),
+            entries: &[
+                buffers::storage_entry(0, true, 4),
+                buffers::storage_entry(1, true, 8),
+                buffers::storage_entry(2, true, std::mem::size_of::<GpuLightSample>() as u64),
+            ],
+        })
+    }
+
+    pub fn bind_group(
+        &self,
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        samples: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("firstshot.first_shot_table.bind_group"),
+            layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: self.offsets.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: self.entries.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: samples.as_entire_binding() },
+            ],
+        })
+    }
+
     /// No light pairs: every patch's row is empty.
     pub fn empty(device: &wgpu::Device, patch_count: u32) -> Self {
         FirstShotTable {
@@ -198,12 +203,7 @@ impl FirstShotTable {
                 4 * (patch_count as u64 + 1),
                 wgpu::BufferUsages::COPY_SRC,
             ),
-            entries: buffers::storage_zeroed(
-                device,
-                "firstshot.first_shot.entries",
-                16,
-                wgpu::BufferUsages::COPY_SRC,
-            ),
+            entries: buffers::storage_zeroed(device, "firstshot.first_shot.entries", 16, wgpu::BufferUsages::COPY_SRC),
             entry_count: 0,
         }
     }

@@ -8,9 +8,5 @@ use std::path::Path;
 
 /// Loads and validates a scene file. Errors name the file, the key and what was expected.
 pub fn load(path: &Path) -> Result<Scene> {
-    Err(Error::scene(
-        path,
-        "format",
-        "scene loading is not written yet",
-    ))
+    Err(Error::scene(path, "format", "scene loading is not written yet"))
 }

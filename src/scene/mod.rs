@@ -80,11 +80,7 @@ pub enum MaterialKind {
     /// Lambertian, f = albedo / pi.
     Diffuse { albedo: Rgb },
     /// max-Phong: f = kd / pi + ks max(0, cos psi)^n / max(cos theta_in, cos theta_out).
-    Phong {
-        diffuse: Rgb,
-        specular: Rgb,
-        shininess: f32,
-    },
+    Phong { diffuse: Rgb, specular: Rgb, shininess: f32 },
 }
 
 /// One triangle of a shape, counter-clockwise seen from its front.
@@ -113,9 +109,5 @@ pub enum Light {
     /// Isotropic point light; intensity = power / (4 pi).
     Point { position: DVec3, power: Rgb },
     /// One-sided diffuse planar convex quad, meshed into `subdivisions` x `subdivisions` cells.
-    Area {
-        vertices: [DVec3; 4],
-        radiance: Rgb,
-        subdivisions: u32,
-    },
+    Area { vertices: [DVec3; 4], radiance: Rgb, subdivisions: u32 },
 }

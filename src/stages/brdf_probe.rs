@@ -16,11 +16,7 @@ pub struct BrdfQuery {
 }
 
 /// Evaluates every query on the GPU and returns f per query.
-pub fn evaluate(
-    ctx: &Context,
-    materials: &[GpuMaterial],
-    queries: &[BrdfQuery],
-) -> Result<Vec<[f32; 3]>> {
+pub fn evaluate(ctx: &Context, materials: &[GpuMaterial], queries: &[BrdfQuery]) -> Result<Vec<[f32; 3]>> {
     let device = &ctx.device;
     let module = kernel::module(device, "brdf_probe");
     let packed: Vec<[f32; 4]> = queries
@@ -35,8 +31,7 @@ pub fn evaluate(
         })
         .collect();
     let none = wgpu::BufferUsages::empty();
-    let materials =
-        buffers::storage_init(device, "firstshot.brdf_probe.materials", materials, none);
+    let materials = buffers::storage_init(device, "firstshot.brdf_probe.materials", materials, none);
     let queries_buf = buffers::storage_init(device, "firstshot.brdf_probe.queries", &packed, none);
     let results = buffers::storage_zeroed(
         device,
@@ -56,14 +51,8 @@ pub fn evaluate(
         label: Some("firstshot.brdf_probe.bind_group"),
         layout: &pipeline.get_bind_group_layout(0),
         entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: materials.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: queries_buf.as_entire_binding(),
-            },
+            wgpu::BindGroupEntry { binding: 0, resource: materials.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: queries_buf.as_entire_binding() },
             wgpu::BindGroupEntry {
                 binding: 2,
                 resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -74,9 +63,8 @@ pub fn evaluate(
             },
         ],
     });
-    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-        label: Some("firstshot.brdf_probe"),
-    });
+    let mut encoder =
+        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.brdf_probe") });
     {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("firstshot.brdf_probe.pass"),
@@ -87,7 +75,6 @@ pub fn evaluate(
         pass.dispatch_workgroups((queries.len() as u32).div_ceil(64), 1, 1);
     }
     ctx.queue.submit([encoder.finish()]);
-    let out: Vec<[f32; 4]> =
-        buffers::read_back(device, &ctx.queue, &results, 16 * queries.len() as u64)?;
+    let out: Vec<[f32; 4]> = buffers::read_back(device, &ctx.queue, &results, 16 * queries.len() as u64)?;
     Ok(out.iter().map(|v| [v[0], v[1], v[2]]).collect())
 }

@@ -10,13 +10,7 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// The uniform for `camera`, with the sample at `jitter` inside each pixel. `near` bounds
 /// the reversed-z projection; with a 32-bit float depth it costs no precision further away.
-pub fn gpu_camera(
-    camera: &Camera,
-    width: u32,
-    height: u32,
-    near: f64,
-    jitter: [f32; 2],
-) -> GpuCamera {
+pub fn gpu_camera(camera: &Camera, width: u32, height: u32, near: f64, jitter: [f32; 2]) -> GpuCamera {
     let tan_y = (camera.fov_y.to_radians() * 0.5).tan();
     let tan_x = tan_y * width as f64 / height as f64;
     View {
@@ -59,12 +53,7 @@ impl View {
             right: f(right, self.tan[0]),
             up: f(up, self.tan[1]),
             forward: f(forward, self.near),
-            jitter: [
-                jitter[0],
-                jitter[1],
-                self.window_centre[0] as f32,
-                self.window_centre[1] as f32,
-            ],
+            jitter: [jitter[0], jitter[1], self.window_centre[0] as f32, self.window_centre[1] as f32],
             size: [self.size[0], self.size[1], 0, 0],
         }
     }
@@ -87,10 +76,7 @@ impl CameraItemBuffer {
         let module = kernel::module(device, "camera_item_buffer");
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("firstshot.camera_item_buffer.layout"),
-            entries: &[buffers::uniform_entry::<GpuCamera>(
-                0,
-                wgpu::ShaderStages::VERTEX,
-            )],
+            entries: &[buffers::uniform_entry::<GpuCamera>(0, wgpu::ShaderStages::VERTEX)],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("firstshot.camera_item_buffer.pipeline_layout"),
@@ -141,16 +127,9 @@ impl CameraItemBuffer {
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("firstshot.camera_item_buffer.bind_group"),
             layout: &layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: camera.as_entire_binding(),
-            }],
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: camera.as_entire_binding() }],
         });
-        let size = wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        };
+        let size = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
         let ids = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("firstshot.camera_item_buffer.ids"),
             size,
@@ -186,12 +165,7 @@ impl CameraItemBuffer {
     }
 
     /// Records the pass: every patch rasterised with its id.
-    pub fn record(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        vertices: &wgpu::Buffer,
-        patch_count: u32,
-    ) {
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, vertices: &wgpu::Buffer, patch_count: u32) {
         self.record_rows(encoder, vertices, patch_count, self.height);
     }
 
@@ -216,10 +190,7 @@ impl CameraItemBuffer {
             })],
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &self.depth_view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(0.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
                 stencil_ops: None,
             }),
             timestamp_writes: None,
@@ -236,8 +207,7 @@ impl CameraItemBuffer {
 
 /// The vertex layout of `RasterVertex`, shared by every rasterising stage.
 pub fn raster_vertex_layout() -> wgpu::VertexBufferLayout<'static> {
-    const ATTRIBUTES: [wgpu::VertexAttribute; 2] =
-        wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32];
+    const ATTRIBUTES: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32];
     wgpu::VertexBufferLayout {
         array_stride: std::mem::size_of::<RasterVertex>() as u64,
         step_mode: wgpu::VertexStepMode::Vertex,

@@ -27,12 +27,7 @@ pub struct FirstShotReduce {
 }
 
 impl FirstShotReduce {
-    pub fn new(
-        device: &wgpu::Device,
-        scene: &SceneBuffers,
-        faces: &CameraItemBuffer,
-        capacity: u32,
-    ) -> Self {
+    pub fn new(device: &wgpu::Device, scene: &SceneBuffers, faces: &CameraItemBuffer, capacity: u32) -> Self {
         use buffers::storage_entry as storage;
         let compute = wgpu::ShaderStages::COMPUTE;
         let module = kernel::module(device, "first_shot_reduce");
@@ -88,68 +83,25 @@ impl FirstShotReduce {
             &<GpuAppendParams as bytemuck::Zeroable>::zeroed(),
         );
         let sums = buffers::storage_zeroed(device, "firstshot.first_shot_reduce.sums", 8 * n, none);
-        let row_counts = buffers::storage_zeroed(
-            device,
-            "firstshot.first_shot_reduce.row_counts",
-            4 * (n + 1),
-            none,
-        );
-        let pairs = buffers::storage_zeroed(
-            device,
-            "firstshot.first_shot_reduce.pairs",
-            16 * capacity.max(1) as u64,
-            none,
-        );
-        let pair_count = buffers::storage_zeroed(
-            device,
-            "firstshot.first_shot_reduce.pair_count",
-            4,
-            wgpu::BufferUsages::COPY_SRC,
-        );
+        let row_counts = buffers::storage_zeroed(device, "firstshot.first_shot_reduce.row_counts", 4 * (n + 1), none);
+        let pairs =
+            buffers::storage_zeroed(device, "firstshot.first_shot_reduce.pairs", 16 * capacity.max(1) as u64, none);
+        let pair_count =
+            buffers::storage_zeroed(device, "firstshot.first_shot_reduce.pair_count", 4, wgpu::BufferUsages::COPY_SRC);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("firstshot.first_shot_reduce.bind_group"),
             layout: &layout,
             entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: faces.camera.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: face_params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&faces.ids_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: scene.patches.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: scene.samples.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: sums.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: append_params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: row_counts.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 8,
-                    resource: pairs.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 9,
-                    resource: pair_count.as_entire_binding(),
-                },
+                wgpu::BindGroupEntry { binding: 0, resource: faces.camera.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: face_params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&faces.ids_view) },
+                wgpu::BindGroupEntry { binding: 3, resource: scene.patches.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: scene.samples.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: sums.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 6, resource: append_params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 7, resource: row_counts.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 8, resource: pairs.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 9, resource: pair_count.as_entire_binding() },
             ],
         });
         FirstShotReduce {

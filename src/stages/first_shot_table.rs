@@ -28,17 +28,8 @@ pub fn build(
         8 * pair_total.max(1) as u64,
         wgpu::BufferUsages::COPY_SRC,
     );
-    let cursor = buffers::storage_zeroed(
-        device,
-        "firstshot.first_shot_table.cursor",
-        4 * patch_count as u64,
-        none,
-    );
-    let params = buffers::uniform(
-        device,
-        "firstshot.first_shot_table.params",
-        &[pair_total, patch_count, 0, 0],
-    );
+    let cursor = buffers::storage_zeroed(device, "firstshot.first_shot_table.cursor", 4 * patch_count as u64, none);
+    let params = buffers::uniform(device, "firstshot.first_shot_table.params", &[pair_total, patch_count, 0, 0]);
     let scan = PrefixSum::new(device, patch_count + 1, row_counts, &offsets);
     scan.record(encoder);
 
@@ -72,26 +63,11 @@ pub fn build(
         label: Some("firstshot.first_shot_table.bind_group"),
         layout: &layout,
         entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: params.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: pairs.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: offsets.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 3,
-                resource: cursor.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 4,
-                resource: entries.as_entire_binding(),
-            },
+            wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: pairs.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 2, resource: offsets.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 3, resource: cursor.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 4, resource: entries.as_entire_binding() },
         ],
     });
     {
@@ -107,13 +83,5 @@ pub fn build(
         let (x, y) = dispatch_size(patch_count.div_ceil(64));
         pass.dispatch_workgroups(x, y, 1);
     }
-    (
-        FirstShotTable {
-            offsets,
-            entries,
-            entry_count: pair_total,
-        },
-        vec![cursor, params],
-        scan,
-    )
+    (FirstShotTable { offsets, entries, entry_count: pair_total }, vec![cursor, params], scan)
 }

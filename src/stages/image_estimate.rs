@@ -1,11 +1,9 @@
 //! Image estimate (`wgsl/image_estimate.wgsl`): adds one estimate of every camera pixel to
 //! the running sum of the image.
 
-use crate::gpu::scene_buffers::SceneBuffers;
+use crate::gpu::scene_buffers::{FirstShotTable, SceneBuffers};
 use crate::gpu::{buffers, kernel};
-use crate::layout::{
-    GpuCamera, GpuEstimateParams, GpuLightSample, GpuMaterial, GpuPatch, GpuPatchState,
-};
+use crate::layout::{GpuCamera, GpuEstimateParams, GpuMaterial, GpuPatch, GpuPatchState};
 use crate::stages::camera_item_buffer::CameraItemBuffer;
 use crate::{Error, Result};
 
@@ -15,6 +13,7 @@ const WORKGROUP: u32 = 8;
 pub struct ImageEstimate {
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
+    table_group: wgpu::BindGroup,
     pub params: wgpu::Buffer,
     pub image_sum: wgpu::Buffer,
     width: u32,
@@ -44,15 +43,13 @@ impl ImageEstimate {
                 storage(3, true, std::mem::size_of::<GpuPatch>() as u64),
                 storage(4, true, std::mem::size_of::<GpuMaterial>() as u64),
                 storage(5, true, std::mem::size_of::<GpuPatchState>() as u64),
-                storage(6, true, 4),
-                storage(7, true, 8),
-                storage(8, true, std::mem::size_of::<GpuLightSample>() as u64),
-                storage(9, false, 16),
+                storage(6, false, 16),
             ],
         });
+        let table_layout = FirstShotTable::layout(device);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("firstshot.image_estimate.pipeline_layout"),
-            bind_group_layouts: &[Some(&layout)],
+            bind_group_layouts: &[Some(&layout), Some(&table_layout)],
             immediate_size: 0,
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -79,51 +76,20 @@ impl ImageEstimate {
             label: Some("firstshot.image_estimate.bind_group"),
             layout: &layout,
             entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: camera.camera.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&camera.ids_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: scene.patches.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: scene.materials.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: scene.state.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: scene.first_shot.offsets.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: scene.first_shot.entries.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 8,
-                    resource: scene.samples.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 9,
-                    resource: image_sum.as_entire_binding(),
-                },
+                wgpu::BindGroupEntry { binding: 0, resource: camera.camera.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&camera.ids_view) },
+                wgpu::BindGroupEntry { binding: 3, resource: scene.patches.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: scene.materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: scene.state.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 6, resource: image_sum.as_entire_binding() },
             ],
         });
+        let table_group = scene.first_shot.bind_group(device, &table_layout, &scene.samples);
         ImageEstimate {
             pipeline,
             bind_group,
+            table_group,
             params,
             image_sum,
             width: camera.width,
@@ -139,11 +105,7 @@ impl ImageEstimate {
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.dispatch_workgroups(
-            self.width.div_ceil(WORKGROUP),
-            self.height.div_ceil(WORKGROUP),
-            1,
-        );
+        pass.dispatch_workgroups(self.width.div_ceil(WORKGROUP), self.height.div_ceil(WORKGROUP), 1);
     }
 
     /// Clears the running sum.

@@ -8,11 +8,7 @@ pub const BLOCK: u32 = 1024;
 /// Workgroup counts for `blocks` workgroups, folded into 2D past the 65535 limit.
 pub fn dispatch_size(blocks: u32) -> (u32, u32) {
     const MAX: u32 = 65535;
-    if blocks <= MAX {
-        (blocks.max(1), 1)
-    } else {
-        (MAX, blocks.div_ceil(MAX))
-    }
+    if blocks <= MAX { (blocks.max(1), 1) } else { (MAX, blocks.div_ceil(MAX)) }
 }
 
 struct Level {
@@ -31,12 +27,7 @@ pub struct PrefixSum {
 
 impl PrefixSum {
     /// `values` (n u32) are scanned into `scanned` (n u32, may not alias `values`).
-    pub fn new(
-        device: &wgpu::Device,
-        n: u32,
-        values: &wgpu::Buffer,
-        scanned: &wgpu::Buffer,
-    ) -> Self {
+    pub fn new(device: &wgpu::Device, n: u32, values: &wgpu::Buffer, scanned: &wgpu::Buffer) -> Self {
         let module = kernel::module(device, "prefix_sum");
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("firstshot.prefix_sum.layout"),
@@ -62,8 +53,7 @@ impl PrefixSum {
                 cache: None,
             })
         };
-        let (scan_pipeline, add_pipeline) =
-            (pipeline("scan_blocks"), pipeline("add_block_offsets"));
+        let (scan_pipeline, add_pipeline) = (pipeline("scan_blocks"), pipeline("add_block_offsets"));
         let mut owned = Vec::new();
         let mut levels = Vec::new();
         // Level k scans `input` into `output`; its block sums are level k+1's input.
@@ -90,22 +80,10 @@ impl PrefixSum {
                     label: Some("firstshot.prefix_sum.bind_group"),
                     layout: &layout,
                     entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: params.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: a.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: b.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: c.as_entire_binding(),
-                        },
+                        wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: a.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 2, resource: b.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 3, resource: c.as_entire_binding() },
                     ],
                 })
             };
@@ -123,12 +101,7 @@ impl PrefixSum {
             owned.extend([sums, sums_scanned]);
             len = blocks;
         }
-        PrefixSum {
-            scan_pipeline,
-            add_pipeline,
-            levels,
-            _buffers: owned,
-        }
+        PrefixSum { scan_pipeline, add_pipeline, levels, _buffers: owned }
     }
 
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {

@@ -8,9 +8,7 @@ use std::path::PathBuf;
 /// failure; with `FIRSTSHOT_REQUIRE_BACKEND=vulkan` so is an adapter of another backend.
 /// Elsewhere a missing adapter is a visible skip.
 pub fn gpu() -> Option<Context> {
-    let choice = std::env::var("FIRSTSHOT_TEST_ADAPTER")
-        .map(|s| s.parse().unwrap())
-        .unwrap_or(AdapterChoice::Auto);
+    let choice = std::env::var("FIRSTSHOT_TEST_ADAPTER").map(|s| s.parse().unwrap()).unwrap_or(AdapterChoice::Auto);
     match Context::new(&choice) {
         Ok(ctx) => {
             if let Ok(backend) = std::env::var("FIRSTSHOT_REQUIRE_BACKEND") {
@@ -35,9 +33,7 @@ pub fn gpu() -> Option<Context> {
 
 /// `target/test-output/<name>`, created; failing image tests write their images there.
 pub fn output_dir(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("target/test-output")
-        .join(name);
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output").join(name);
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
@@ -66,9 +62,7 @@ pub fn patch(v: [DVec3; 3]) -> Patch {
 
 /// Splits a triangle into k^2 congruent ones (the test's own tessellation).
 pub fn split(v: [DVec3; 3], k: u32) -> Vec<[DVec3; 3]> {
-    let p = |i: u32, j: u32| {
-        v[0] + (v[1] - v[0]) * (i as f64 / k as f64) + (v[2] - v[0]) * (j as f64 / k as f64)
-    };
+    let p = |i: u32, j: u32| v[0] + (v[1] - v[0]) * (i as f64 / k as f64) + (v[2] - v[0]) * (j as f64 / k as f64);
     let mut out = Vec::new();
     for i in 0..k {
         for j in 0..k - i {
@@ -83,9 +77,7 @@ pub fn split(v: [DVec3; 3], k: u32) -> Vec<[DVec3; 3]> {
 
 /// The 12 triangles of an axis-aligned box, fronts facing inward (a closed room).
 pub fn room(lo: DVec3, hi: DVec3) -> Vec<[DVec3; 3]> {
-    let c = |x: usize, y: usize, z: usize| {
-        DVec3::new([lo.x, hi.x][x], [lo.y, hi.y][y], [lo.z, hi.z][z])
-    };
+    let c = |x: usize, y: usize, z: usize| DVec3::new([lo.x, hi.x][x], [lo.y, hi.y][y], [lo.z, hi.z][z]);
     let quads = [
         [c(0, 0, 0), c(1, 0, 0), c(1, 0, 1), c(0, 0, 1)], // floor, normal +y
         [c(0, 1, 0), c(0, 1, 1), c(1, 1, 1), c(1, 1, 0)], // ceiling, -y
@@ -99,31 +91,18 @@ pub fn room(lo: DVec3, hi: DVec3) -> Vec<[DVec3; 3]> {
     for q in quads {
         for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
             let n = (t[1] - t[0]).cross(t[2] - t[0]);
-            out.push(if n.dot(centre - t[0]) > 0.0 {
-                t
-            } else {
-                [t[0], t[2], t[1]]
-            });
+            out.push(if n.dot(centre - t[0]) > 0.0 { t } else { [t[0], t[2], t[1]] });
         }
     }
     out
 }
 
 pub fn point_sample(position: DVec3) -> LightSample {
-    LightSample {
-        position,
-        normal: None,
-        strength: [1.0; 3],
-        weight: 1.0,
-        light: 0,
-    }
+    LightSample { position, normal: None, strength: [1.0; 3], weight: 1.0, light: 0 }
 }
 
 pub fn patches_of(triangles: &[[DVec3; 3]], samples: Vec<LightSample>) -> Patches {
-    Patches {
-        patches: triangles.iter().map(|&t| patch(t)).collect(),
-        samples,
-    }
+    Patches { patches: triangles.iter().map(|&t| patch(t)).collect(), samples }
 }
 
 /// Solid angle of a triangle seen from `p` (Van Oosterom and Strackee, 1983).
@@ -163,8 +142,7 @@ pub fn first_shot_table(
     window: firstshot::first_shot::LightWindow,
 ) -> Vec<Vec<(u32, f32)>> {
     let scene = bare_scene();
-    let mut buffers =
-        firstshot::gpu::scene_buffers::SceneBuffers::new(&ctx.device, &scene, patches, true);
+    let mut buffers = firstshot::gpu::scene_buffers::SceneBuffers::new(&ctx.device, &scene, patches, true);
     firstshot::first_shot::run(ctx, &mut buffers, patches, resolution, window).unwrap();
     firstshot::first_shot::read_table(ctx, &buffers).unwrap()
 }

@@ -72,6 +72,24 @@ struct AppendParams {
     _pad3: u32,
 }
 
+// One ray bundle (Rust: GpuBundle).
+struct Bundle {
+    direction: vec4<f32>,   // xyz d, w pixel area dP
+    axis_u: vec4<f32>,      // xyz u / half extent, w sub-pixel shift (clip units)
+    axis_v: vec4<f32>,
+    centre: vec4<f32>,      // xyz bounding-sphere centre, w 1 / radius
+    environment: vec4<f32>,
+    resolution: u32,
+    patch_count: u32,
+    capacity: u32,
+    use_state: u32,
+}
+
+// Which way patch j looks along a bundle: +1 if its front faces +d, else -1 (s_j).
+fn bundle_side(n: vec3<f32>, d: vec3<f32>) -> f32 {
+    return select(-1.0, 1.0, dot(n, d) >= 0.0);
+}
+
 // Direction (not normalised) through the sample point of pixel `pixel` of a camera or face:
 // forward + window position in tangent units.
 fn pixel_direction(camera: Camera, pixel: vec2<u32>) -> vec3<f32> {

@@ -1,0 +1,41 @@
+// Bundle finalize (DESIGN.md 2.4): J_j = (dP / A_j) * (sum of received radiance) from the
+// fixed-point sums, win_j = -s_j d; the sums are cleared for the next step.
+//
+// Compute, workgroup 64, one invocation per patch (2D dispatch past 65535 workgroups).
+// Bindings, group 0:
+//   0 bundle     uniform Bundle          read
+//   1 patches    array<Patch>            read
+//   2 sums       array<u32>              read_write (6 per patch; one invocation per patch)
+//   3 max_bits   array<u32>              read
+//   4 outgoing   array<vec4<f32>>        read (w: s_j)
+//   5 state      array<PatchState>       read_write (one writer per patch)
+// Host: src/stages/bundle_finalize.rs.
+
+@group(0) @binding(0) var<uniform> bundle: Bundle;
+@group(0) @binding(1) var<storage, read> patches: array<Patch>;
+@group(0) @binding(2) var<storage, read_write> sums: array<u32>;
+@group(0) @binding(3) var<storage, read> max_bits: array<u32>;
+@group(0) @binding(4) var<storage, read> outgoing: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> state: array<PatchState>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let j = gid.x + gid.y * groups.x * 64u;
+    if (j >= bundle.patch_count) {
+        return;
+    }
+    let bits = max_bits[0];
+    let e = i32((bits >> 23u) & 0xffu) - 126;
+    let scale = exp2(f32(31 - e));
+    var j_value = vec3<f32>(0.0);
+    for (var c = 0u; c < 3u; c++) {
+        let lo = sums[6u * j + 2u * c];
+        let hi = sums[6u * j + 2u * c + 1u];
+        j_value[c] = (f32(hi) * 4294967296.0 + f32(lo)) / scale;
+        sums[6u * j + 2u * c] = 0u;
+        sums[6u * j + 2u * c + 1u] = 0u;
+    }
+    let factor = bundle.direction.w / patches[j].v0.w;
+    let side = outgoing[j].w;
+    state[j] = PatchState(vec4<f32>(j_value * factor, 0.0), vec4<f32>(-side * bundle.direction.xyz, 0.0));
+}

@@ -1,0 +1,53 @@
+// Bundle reflection (DESIGN.md 2.2): the radiance every patch sends into this step's bundle,
+//   O_j = Le_j + Lfs_j(c_j, s_j d) + 2 pi J_j f_j(win_j, c_j, s_j d),
+// with Le left out for first-shot lights (their first reflection replaces them), and the
+// largest O of the step (for the fixed-point scale of the transfer).
+//
+// Compute, workgroup 64, one invocation per patch (2D dispatch past 65535 workgroups).
+// Bindings, group 0:
+//   0 bundle     uniform Bundle        read
+//   1 patches    array<Patch>          read
+//   2 materials  array<Material>       read
+//   3 state      array<PatchState>     read (J_j, win_j of the previous step)
+//   4 outgoing   array<vec4<f32>>      read_write (rgb O_j, w s_j; one writer per patch)
+//   5 max_bits   atomic<u32>           read_write (bits of the largest O channel; positive
+//                                      floats order like their bits)
+// Group 1: the first-shot table (wgsl/common/first_shot_table.wgsl).
+// Host: src/stages/bundle_reflect.rs.
+
+@group(0) @binding(0) var<uniform> bundle: Bundle;
+@group(0) @binding(1) var<storage, read> patches: array<Patch>;
+@group(0) @binding(2) var<storage, read> materials: array<Material>;
+@group(0) @binding(3) var<storage, read> state: array<PatchState>;
+@group(0) @binding(4) var<storage, read_write> outgoing: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> max_bits: atomic<u32>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let j = gid.x + gid.y * groups.x * 64u;
+    if (j == 0u) {
+        let env = bundle.environment.rgb;
+        atomicMax(&max_bits, bitcast<u32>(max(env.r, max(env.g, env.b))));
+    }
+    if (j >= bundle.patch_count) {
+        return;
+    }
+    let p = patches[j];
+    let n = p.normal.xyz;
+    let d = bundle.direction.xyz;
+    let side = bundle_side(n, d);
+    let w_out = side * d;
+    var o = vec3<f32>(0.0);
+    if ((p.flags & PATCH_FIRST_SHOT_LIGHT) == 0u) {
+        o = p.emission.rgb;
+    }
+    let m = materials[p.material];
+    let c = patch_centre(p);
+    o += first_shot_radiance(j, c, n, m, w_out);
+    if (bundle.use_state != 0u) {
+        let s = state[j];
+        o += 2.0 * PI * s.incoming.rgb * brdf(m, n, -s.direction.xyz, w_out);
+    }
+    outgoing[j] = vec4<f32>(o, side);
+    atomicMax(&max_bits, bitcast<u32>(max(o.r, max(o.g, o.b))));
+}

@@ -1,0 +1,103 @@
+// Bundle transfer (DESIGN.md 2.3-2.4): for every line of the grid, its surfaces sorted by
+// depth along d; each patch receives from the next surface along its front direction s_j d:
+// that surface's O if its front faces back (s_m = -s_j), black if its back does, the
+// environment if there is none. Received radiance is added to the patch's exact 64-bit
+// fixed-point sums (scaled so the step's largest radiance fits in 31 bits), so the result
+// does not depend on thread order and needs no float atomics.
+//
+// Compute, workgroup 64, one invocation per line (2D dispatch past 65535 workgroups).
+// Bindings, group 0:
+//   0 bundle     uniform Bundle          read
+//   1 patches    array<Patch>            read
+//   2 offsets    array<u32>              read (line starts, resolution^2 + 1)
+//   3 fragments  array<vec2<u32>>        read_write (each line's slice sorted in place by
+//                                        its one invocation)
+//   4 outgoing   array<vec4<f32>>        read (O_j, s_j from bundle_reflect)
+//   5 sums       array<atomic<u32>>      read_write (6 per patch: lo, hi per channel)
+//   6 max_bits   array<u32>              read (largest radiance of the step)
+// Host: src/stages/bundle_transfer.rs.
+
+@group(0) @binding(0) var<uniform> bundle: Bundle;
+@group(0) @binding(1) var<storage, read> patches: array<Patch>;
+@group(0) @binding(2) var<storage, read> offsets: array<u32>;
+@group(0) @binding(3) var<storage, read_write> fragments: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read> outgoing: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> sums: array<atomic<u32>>;
+@group(0) @binding(6) var<storage, read> max_bits: array<u32>;
+
+// Fixed-point scale 2^(31 - e) with largest radiance <= 2^e: shared with bundle_finalize.
+fn transfer_scale(bits: u32) -> f32 {
+    let e = i32((bits >> 23u) & 0xffu) - 126;
+    return exp2(f32(31 - e));
+}
+
+// Sort key order: depth, then the surface facing -d first (back-to-back twins lie at the
+// same depth; this order lets each see past the other), then patch index.
+fn before(a: vec2<u32>, b: vec2<u32>) -> bool {
+    let da = bitcast<f32>(a.x);
+    let db = bitcast<f32>(b.x);
+    if (da != db) {
+        return da < db;
+    }
+    let d = bundle.direction.xyz;
+    let sa = bundle_side(patches[a.y].normal.xyz, d);
+    let sb = bundle_side(patches[b.y].normal.xyz, d);
+    if (sa != sb) {
+        return sa < sb;
+    }
+    return a.y < b.y;
+}
+
+fn add_fixed(index: u32, value: u32) {
+    let old = atomicAdd(&sums[index], value);
+    if (old > 0xffffffffu - value) {
+        atomicAdd(&sums[index + 1u], 1u);
+    }
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let line = gid.x + gid.y * groups.x * 64u;
+    if (line >= bundle.resolution * bundle.resolution) {
+        return;
+    }
+    let begin = offsets[line];
+    let end = min(offsets[line + 1u], bundle.capacity);
+    if (begin >= end) {
+        return;
+    }
+    for (var a = begin + 1u; a < end; a++) {
+        let item = fragments[a];
+        var b = a;
+        while (b > begin && before(item, fragments[b - 1u])) {
+            fragments[b] = fragments[b - 1u];
+            b--;
+        }
+        fragments[b] = item;
+    }
+    let scale = transfer_scale(max_bits[0]);
+    for (var k = begin; k < end; k++) {
+        let j = fragments[k].y;
+        let side = outgoing[j].w;
+        var received = bundle.environment.rgb;
+        var neighbour = -1;
+        if (side > 0.0) {
+            if (k + 1u < end) {
+                neighbour = i32(k + 1u);
+            }
+        } else if (k > begin) {
+            neighbour = i32(k - 1u);
+        }
+        if (neighbour >= 0) {
+            let m = fragments[u32(neighbour)].y;
+            let o = outgoing[m];
+            received = select(vec3<f32>(0.0), o.rgb, o.w == -side);
+        }
+        for (var c = 0u; c < 3u; c++) {
+            let value = u32(received[c] * scale + 0.5);
+            if (value != 0u) {
+                add_fixed(6u * j + 2u * c, value);
+            }
+        }
+    }
+}

@@ -1,0 +1,18 @@
+// The first-shot table (bind group 1) and the reflected first-shot radiance, for the
+// kernels that evaluate it (image_estimate, bundle_reflect). Built by src/first_shot.rs.
+
+@group(1) @binding(0) var<storage, read> fs_offsets: array<u32>;       // row starts, patches + 1
+@group(1) @binding(1) var<storage, read> fs_entries: array<vec2<u32>>; // (sample, bits of r_ij)
+@group(1) @binding(2) var<storage, read> samples: array<LightSample>;
+
+// Lfs_j(x, w_out) = sum_i S_i r_ij f_j(w'_i(x), x, w_out), w'_i(x) from y_i to x.
+fn first_shot_radiance(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
+    var sum = vec3<f32>(0.0);
+    for (var e = fs_offsets[j]; e < fs_offsets[j + 1u]; e++) {
+        let entry = fs_entries[e];
+        let s = samples[entry.x];
+        let w_in = normalize(s.position.xyz - x);
+        sum += s.strength.rgb * bitcast<f32>(entry.y) * brdf(m, n, w_in, w_out);
+    }
+    return sum;
+}
