@@ -751,6 +751,136 @@ pub(crate) mod tests {
         assert_eq!(scene_bounds(&Patches::default()), (DVec3::ZERO, 0.0));
     }
 
+    /// The level-l Sierpinski set of SCENE_FORMAT.md, faces outward of their own
+    /// tetrahedra: just enough of the loader's shape to count patches.
+    fn sierpinski(center: DVec3, size: f64, level: u32) -> Vec<[DVec3; 3]> {
+        let (h, r) = (size * (2.0f64 / 3.0).sqrt(), size / 3f64.sqrt());
+        let base = |k: f64| {
+            let angle = 2.0 * std::f64::consts::PI * k / 3.0;
+            center + DVec3::new(r * angle.sin(), -h / 4.0, -r * angle.cos())
+        };
+        let mut tetrahedra = vec![[
+            center + DVec3::new(0.0, 0.75 * h, 0.0),
+            base(0.0),
+            base(1.0),
+            base(2.0),
+        ]];
+        for _ in 0..level {
+            tetrahedra = tetrahedra
+                .iter()
+                .flat_map(|t| (0..4).map(move |c| t.map(|v| 0.5 * (v + t[c]))))
+                .collect();
+        }
+        let mut triangles = Vec::with_capacity(4 * tetrahedra.len());
+        for t in &tetrahedra {
+            for opposite in 0..4 {
+                let [a, b, c] = [1, 2, 3].map(|o| t[(opposite + o) % 4]);
+                let outward = (b - a).cross(c - a).dot(a - t[opposite]) > 0.0;
+                triangles.push(if outward { [a, b, c] } else { [a, c, b] });
+            }
+        }
+        triangles
+    }
+
+    /// Reads the geometry of a scene file with plain TOML (the loader is not this module's).
+    pub(crate) fn scene_from_file(path: &std::path::Path) -> (Scene, f64) {
+        let text = std::fs::read_to_string(path).unwrap();
+        let table: toml::Table = text.parse().unwrap();
+        let number = |v: &toml::Value| v.as_float().or(v.as_integer().map(|i| i as f64)).unwrap();
+        let point = |v: &toml::Value| {
+            let a = v.as_array().unwrap();
+            DVec3::new(number(&a[0]), number(&a[1]), number(&a[2]))
+        };
+        let points = |v: &toml::Value| v.as_array().unwrap().iter().map(point).collect::<Vec<_>>();
+        let colour = |v: &toml::Value| point(v).as_vec3().to_array();
+        let mut surfaces = Vec::new();
+        for shape in table["shapes"].as_array().unwrap() {
+            let triangles = match shape["type"].as_str().unwrap() {
+                "triangle" => {
+                    let v = points(&shape["vertices"]);
+                    vec![[v[0], v[1], v[2]]]
+                }
+                "quad" => {
+                    let v = points(&shape["vertices"]);
+                    vec![[v[0], v[1], v[2]], [v[0], v[2], v[3]]]
+                }
+                "sierpinski" => sierpinski(
+                    point(&shape["center"]),
+                    number(&shape["size"]),
+                    shape["level"].as_integer().unwrap() as u32,
+                ),
+                other => panic!("shape type {other} is not read by this test"),
+            };
+            let two_sided = shape.get("two_sided").is_some_and(|v| v.as_bool().unwrap());
+            surfaces.push(surface(&triangles, two_sided));
+        }
+        let mut lights = Vec::new();
+        for light in table
+            .get("lights")
+            .and_then(|l| l.as_array())
+            .into_iter()
+            .flatten()
+        {
+            lights.push(match light["type"].as_str().unwrap() {
+                "point" => Light::Point {
+                    position: point(&light["position"]),
+                    power: colour(&light["power"]),
+                },
+                _ => {
+                    let v = points(&light["vertices"]);
+                    Light::Area {
+                        vertices: [v[0], v[1], v[2], v[3]],
+                        radiance: colour(&light["radiance"]),
+                        subdivisions: light
+                            .get("subdivisions")
+                            .map_or(1, |n| n.as_integer().unwrap() as u32),
+                    }
+                }
+            });
+        }
+        let patch_size = number(&table["settings"]["patch_size"]);
+        (scene_of(surfaces, lights), patch_size)
+    }
+
+    #[test]
+    fn sierpinski_scene_has_about_as_many_patches_as_the_papers() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/sierpinski.toml");
+        let (scene, patch_size) = scene_from_file(&path);
+        let start = std::time::Instant::now();
+        let patches = tessellate(&scene, patch_size).unwrap();
+        let elapsed = start.elapsed();
+        let stats = patches.stats();
+        println!("{stats:?} in {elapsed:?}");
+        assert!(
+            (20_000..=25_000).contains(&patches.patches.len()),
+            "{stats:?}"
+        );
+        assert_eq!(stats.light_patches, 8);
+        assert_eq!(stats.samples, 9);
+        let fractal = &scene.surfaces[6];
+        assert_eq!(fractal.triangles.len(), 4usize.pow(7));
+        let fractal_patches = patches
+            .patches
+            .iter()
+            .filter(|p| p.kind == PatchKind::Surface { surface: 6 })
+            .count();
+        assert_eq!(
+            fractal_patches,
+            fractal.triangles.len(),
+            "the fractal is never cut"
+        );
+        // The room is closed and faces inward: its patches' normals point at the centre.
+        let (center, radius) = scene_bounds(&patches);
+        assert!(radius > 0.0);
+        for p in patches
+            .patches
+            .iter()
+            .filter(|p| matches!(p.kind, PatchKind::Surface { surface: 0..6 }))
+        {
+            assert!((center - p.vertices[0]).dot(p.normal) > 0.0);
+        }
+    }
+
     #[test]
     fn stats_count_and_add_up() {
         let triangles = random_triangles(5, 4);
