@@ -1,10 +1,18 @@
 //! Surfaces -> patches; lights -> light samples (DESIGN.md section 1).
 //!
-//! To be implemented: see `tessellate`.
+//! A surface triangle is cut into k^2 congruent copies of itself scaled by 1/k, so every
+//! patch of a triangle has the same area and the source's normal, and the areas add up to
+//! the source's without a gap. An area light is meshed on its own n x n grid, whatever the
+//! patch size: its vertices are the first shot's samples, and the trapezoid weights need
+//! exactly that grid.
 
-use super::{Rgb, Scene};
-use crate::Result;
+use super::{Light, Rgb, Scene, Triangle};
+use crate::{Error, Result};
 use glam::DVec3;
+
+/// The most patches a tessellation may produce. Beyond it the per-patch GPU buffers of a
+/// few words each pass a gigabyte, and ids would crowd the 32-bit item buffers.
+pub const MAX_PATCHES: u64 = 1 << 27;
 
 /// What a patch is part of.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,15 +60,837 @@ pub struct LightSample {
 }
 
 /// The tessellated scene.
+///
+/// Order: the surfaces' patches in the order of `Scene::surfaces` and their triangles (a
+/// twin right after its patch), then the area lights' patches in the order of
+/// `Scene::lights`; the samples in the order of `Scene::lights`, an area light's row by row
+/// from v0 (index j (n + 1) + i for the vertex i steps from v0 towards v1 and j towards v3).
 #[derive(Debug, Clone, Default)]
 pub struct Patches {
     pub patches: Vec<Patch>,
     pub samples: Vec<LightSample>,
 }
 
+/// A summary for progress output and `--stats`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PatchStats {
+    /// Patches of `[[shapes]]`, twins included.
+    pub surface_patches: usize,
+    /// Patches of area lights.
+    pub light_patches: usize,
+    pub samples: usize,
+    /// Sum of the areas of all patches (a two-sided surface counts twice).
+    pub total_area: f64,
+}
+
+impl Patches {
+    pub fn stats(&self) -> PatchStats {
+        let light_patches = self
+            .patches
+            .iter()
+            .filter(|p| matches!(p.kind, PatchKind::AreaLight { .. }))
+            .count();
+        PatchStats {
+            surface_patches: self.patches.len() - light_patches,
+            light_patches,
+            samples: self.samples.len(),
+            total_area: self.patches.iter().map(|p| p.area).sum(),
+        }
+    }
+}
+
 /// Tessellates every surface into triangles whose longest edge is at most `patch_size`
 /// (a two-sided surface into back-to-back pairs), and meshes every area light into its
 /// n x n grid: 2 n^2 patches and (n+1)^2 samples with trapezoid weights.
-pub fn tessellate(_scene: &Scene, _patch_size: f64) -> Result<Patches> {
-    Ok(Patches::default())
+///
+/// `patch_size = +inf` (what `Settings::default` holds when a scene names none) keeps every
+/// triangle whole. A patch size that is NaN or not > 0, and a result of more than
+/// `MAX_PATCHES` patches (counted before anything is allocated), are refused.
+pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
+    if patch_size.is_nan() || patch_size <= 0.0 {
+        return Err(Error::Usage(format!(
+            "patch size must be a number > 0, got {patch_size}"
+        )));
+    }
+
+    let (mut count, mut light_count) = (0u64, 0u64);
+    for (s, surface) in scene.surfaces.iter().enumerate() {
+        let copies = if surface.two_sided { 2 } else { 1 };
+        for (t, triangle) in surface.triangles.iter().enumerate() {
+            let k = SourceTriangle::new(scene, s, t, triangle)?.splits(patch_size);
+            count = count.saturating_add(k.saturating_mul(k).saturating_mul(copies));
+        }
+    }
+    for (l, light) in scene.lights.iter().enumerate() {
+        if let Light::Area { subdivisions, .. } = *light {
+            if subdivisions == 0 {
+                return Err(Error::scene(
+                    &scene.source,
+                    format!("lights[{l}].subdivisions"),
+                    "expected an integer >= 1, got 0",
+                ));
+            }
+            let n = u64::from(subdivisions);
+            light_count = light_count.saturating_add(n.saturating_mul(n).saturating_mul(2));
+        }
+    }
+    if light_count > MAX_PATCHES {
+        return Err(Error::Usage(format!(
+            "the area lights' subdivisions make {light_count} patches, more than the limit \
+             of {MAX_PATCHES}"
+        )));
+    }
+    let count = count.saturating_add(light_count);
+    if count > MAX_PATCHES {
+        let shown = if count == u64::MAX {
+            "more than 10^19".to_string()
+        } else {
+            count.to_string()
+        };
+        return Err(Error::Usage(format!(
+            "patch size {patch_size} would make {shown} patches, more than the limit of \
+             {MAX_PATCHES}; choose a larger --patch-size"
+        )));
+    }
+    let sample_count: usize = scene
+        .lights
+        .iter()
+        .map(|light| match *light {
+            Light::Point { .. } => 1,
+            Light::Area { subdivisions, .. } => (subdivisions as usize + 1).pow(2),
+        })
+        .sum();
+
+    let mut out = Patches {
+        patches: Vec::with_capacity(count as usize),
+        samples: Vec::with_capacity(sample_count),
+    };
+    for (s, surface) in scene.surfaces.iter().enumerate() {
+        for (t, triangle) in surface.triangles.iter().enumerate() {
+            let source = SourceTriangle::new(scene, s, t, triangle)?;
+            let base = Patch {
+                vertices: triangle.vertices,
+                normal: source.normal,
+                area: 0.0,
+                material: Some(triangle.material),
+                emission: surface.emission,
+                kind: PatchKind::Surface { surface: s as u32 },
+                twin: surface.two_sided,
+            };
+            source.split_into(&base, patch_size, &mut out.patches);
+        }
+    }
+    for (l, light) in scene.lights.iter().enumerate() {
+        match *light {
+            Light::Point { position, power } => out.samples.push(LightSample {
+                position,
+                normal: None,
+                strength: power,
+                weight: 1.0,
+                light: l as u32,
+            }),
+            Light::Area {
+                vertices,
+                radiance,
+                subdivisions,
+            } => mesh_area_light(scene, l, vertices, radiance, subdivisions, &mut out)?,
+        }
+    }
+    Ok(out)
+}
+
+/// The bounding sphere of every patch vertex and light sample: the centre of their
+/// axis-aligned box and the distance from it to the farthest point. `(0, 0)` when empty.
+pub fn scene_bounds(patches: &Patches) -> (DVec3, f64) {
+    let points = || {
+        patches
+            .patches
+            .iter()
+            .flat_map(|p| p.vertices)
+            .chain(patches.samples.iter().map(|s| s.position))
+    };
+    let (lo, hi) = points().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(p), hi.max(p)),
+    );
+    if lo.x > hi.x {
+        return (DVec3::ZERO, 0.0);
+    }
+    let center = 0.5 * (lo + hi);
+    let radius = points().map(|p| p.distance(center)).fold(0.0, f64::max);
+    (center, radius)
+}
+
+/// A surface triangle, checked, with what its patches share.
+struct SourceTriangle {
+    vertices: [DVec3; 3],
+    normal: DVec3,
+    area: f64,
+    longest_edge: f64,
+}
+
+impl SourceTriangle {
+    fn new(scene: &Scene, s: usize, t: usize, triangle: &Triangle) -> Result<Self> {
+        let [v0, v1, v2] = triangle.vertices;
+        let cross = (v1 - v0).cross(v2 - v0);
+        let area = 0.5 * cross.length();
+        let longest_edge = (v1 - v0)
+            .length()
+            .max((v2 - v1).length())
+            .max((v0 - v2).length());
+        // The loader refuses these; a scene built in code must not reach the GPU with them.
+        if !(area > 0.0 && area.is_finite() && longest_edge.is_finite()) {
+            let origin = &scene.surfaces[s].origin;
+            return Err(Error::scene(
+                &scene.source,
+                format!("{origin}, triangle {t}"),
+                format!("degenerate or non-finite triangle {:?}", triangle.vertices),
+            ));
+        }
+        Ok(SourceTriangle {
+            vertices: triangle.vertices,
+            normal: cross.normalize(),
+            area,
+            longest_edge,
+        })
+    }
+
+    /// k: the number of pieces each edge is cut into. Saturates instead of overflowing, so
+    /// that an absurd patch size is reported by the patch limit.
+    fn splits(&self, patch_size: f64) -> u64 {
+        let ratio = self.longest_edge / patch_size;
+        if ratio > (1u64 << 32) as f64 {
+            return 1 << 32;
+        }
+        let mut k = (ratio.ceil() as u64).max(1);
+        // ceil may land one short when longest / patch_size rounds down to an integer.
+        while self.longest_edge / k as f64 > patch_size {
+            k += 1;
+        }
+        k
+    }
+
+    /// Appends the k^2 patches (and twins): on the lattice v0 + (i e1 + j e2) / k, the
+    /// "upright" triangles are translates of the source scaled by 1/k and the "inverted"
+    /// ones are those rotated by 180 degrees in its plane, so all keep its winding.
+    fn split_into(&self, base: &Patch, patch_size: f64, out: &mut Vec<Patch>) {
+        let k = self.splits(patch_size);
+        let [v0, v1, v2] = self.vertices;
+        let kf = k as f64;
+        let (e1, e2) = (v1 - v0, v2 - v0);
+        let at = |i: u64, j: u64| v0 + e1 * (i as f64 / kf) + e2 * (j as f64 / kf);
+        let area = self.area / (kf * kf);
+        let mut push = |vertices: [DVec3; 3]| {
+            let patch = Patch {
+                vertices,
+                normal: self.normal,
+                area,
+                ..*base
+            };
+            out.push(patch);
+            if base.twin {
+                let [a, b, c] = vertices;
+                out.push(Patch {
+                    vertices: [a, c, b],
+                    normal: -self.normal,
+                    ..patch
+                });
+            }
+        };
+        if k == 1 {
+            push(self.vertices);
+            return;
+        }
+        for j in 0..k {
+            for i in 0..k - j {
+                push([at(i, j), at(i + 1, j), at(i, j + 1)]);
+                if i + j + 2 <= k {
+                    push([at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)]);
+                }
+            }
+        }
+    }
+}
+
+/// The n x n grid of an area light: vertex (i, j) is the bilinear blend of v0..v3 at
+/// (i/n, j/n), cell (i, j) is cut along the same diagonal as the quad itself (v0-v2), so
+/// n = 1 gives the loader's own two triangles. Each sample's weight is a third of the area
+/// of the triangles around it: the trapezoid rule over the light's triangles.
+fn mesh_area_light(
+    scene: &Scene,
+    l: usize,
+    [v0, v1, v2, v3]: [DVec3; 4],
+    radiance: Rgb,
+    n: u32,
+    out: &mut Patches,
+) -> Result<()> {
+    let normal = (v2 - v0).cross(v3 - v1).normalize_or_zero();
+    if normal == DVec3::ZERO || !normal.is_finite() {
+        return Err(Error::scene(
+            &scene.source,
+            format!("lights[{l}].vertices"),
+            "degenerate or non-finite area light",
+        ));
+    }
+    let n = n as usize;
+    let row = n + 1;
+    let first_sample = out.samples.len();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+            let position = (1.0 - v) * ((1.0 - u) * v0 + u * v1) + v * ((1.0 - u) * v3 + u * v2);
+            out.samples.push(LightSample {
+                position,
+                normal: Some(normal),
+                strength: radiance,
+                weight: 0.0,
+                light: l as u32,
+            });
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let corners = [
+                j * row + i,
+                j * row + i + 1,
+                (j + 1) * row + i + 1,
+                (j + 1) * row + i,
+            ];
+            for [a, b, c] in [[0, 1, 2], [0, 2, 3]] {
+                let ids = [corners[a], corners[b], corners[c]];
+                let vertices = ids.map(|id| out.samples[first_sample + id].position);
+                let cross = (vertices[1] - vertices[0]).cross(vertices[2] - vertices[0]);
+                let area = 0.5 * cross.length();
+                if !(area > 0.0 && area.is_finite()) {
+                    return Err(Error::scene(
+                        &scene.source,
+                        format!("lights[{l}].vertices"),
+                        "the light's grid has a degenerate cell: is the quad convex?",
+                    ));
+                }
+                for id in ids {
+                    out.samples[first_sample + id].weight += area / 3.0;
+                }
+                out.patches.push(Patch {
+                    vertices,
+                    normal: cross.normalize(),
+                    area,
+                    material: None,
+                    emission: radiance,
+                    kind: PatchKind::AreaLight { light: l as u32 },
+                    twin: false,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::scene::{Camera, Material, MaterialKind, Settings, Surface};
+    use rand_core::{RngCore, SeedableRng};
+    use rand_pcg::Pcg64;
+
+    /// Patches are built from the same f64 numbers as their source: what is exact on paper
+    /// may be off by a few ulps of the scene's size, never more.
+    const ROUNDING: f64 = 1e-12;
+
+    /// A scene made of the given surfaces and lights, with one diffuse material.
+    pub(crate) fn scene_of(surfaces: Vec<Surface>, lights: Vec<Light>) -> Scene {
+        Scene {
+            source: "test.toml".into(),
+            camera: Camera {
+                position: DVec3::new(0.0, 0.0, 5.0),
+                look_at: DVec3::ZERO,
+                up: DVec3::Y,
+                fov_y: 45.0,
+                width: 64,
+                height: 64,
+            },
+            environment: [0.0; 3],
+            settings: Settings::default(),
+            materials: vec![Material {
+                name: "white".into(),
+                kind: MaterialKind::Diffuse { albedo: [0.5; 3] },
+            }],
+            surfaces,
+            lights,
+        }
+    }
+
+    pub(crate) fn surface(triangles: &[[DVec3; 3]], two_sided: bool) -> Surface {
+        Surface {
+            origin: "shapes[0] (test)".into(),
+            triangles: triangles
+                .iter()
+                .map(|&vertices| Triangle {
+                    vertices,
+                    material: 0,
+                })
+                .collect(),
+            emission: [0.25, 0.5, 1.0],
+            two_sided,
+        }
+    }
+
+    fn uniform(rng: &mut Pcg64) -> f64 {
+        (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Triangles of every shape: slivers, obtuse, large and far from the origin.
+    fn random_triangles(seed: u64, count: usize) -> Vec<[DVec3; 3]> {
+        let mut rng = Pcg64::seed_from_u64(seed);
+        let mut point = |scale: f64| {
+            DVec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) * scale
+        };
+        (0..count)
+            .map(|t| {
+                let offset = point(100.0);
+                let scale = [0.3, 1.0, 7.0][t % 3];
+                [
+                    offset + point(scale),
+                    offset + point(scale),
+                    offset + point(scale),
+                ]
+            })
+            .collect()
+    }
+
+    fn triangle_area([a, b, c]: [DVec3; 3]) -> f64 {
+        0.5 * (b - a).cross(c - a).length()
+    }
+
+    fn longest_edge([a, b, c]: [DVec3; 3]) -> f64 {
+        a.distance(b).max(b.distance(c)).max(c.distance(a))
+    }
+
+    fn square_light(side: f64, n: u32) -> Light {
+        // Counter-clockwise seen from below: a ceiling light facing -y.
+        Light::Area {
+            vertices: [
+                DVec3::new(0.0, 2.0, 0.0),
+                DVec3::new(side, 2.0, 0.0),
+                DVec3::new(side, 2.0, side),
+                DVec3::new(0.0, 2.0, side),
+            ],
+            radiance: [10.0, 20.0, 30.0],
+            subdivisions: n,
+        }
+    }
+
+    #[test]
+    fn area_is_preserved_and_edges_are_short() {
+        let triangles = random_triangles(7, 60);
+        let scene = scene_of(vec![surface(&triangles, false)], vec![]);
+        let source_area: f64 = triangles.iter().copied().map(triangle_area).sum();
+        for patch_size in [0.05, 0.3, 1.0, 2.5, 100.0] {
+            let patches = tessellate(&scene, patch_size).unwrap();
+            let total: f64 = patches.patches.iter().map(|p| p.area).sum();
+            assert!((total - source_area).abs() <= ROUNDING * source_area);
+            for p in &patches.patches {
+                assert!(longest_edge(p.vertices) <= patch_size * (1.0 + ROUNDING));
+                let area = triangle_area(p.vertices);
+                assert!(
+                    (area - p.area).abs() <= 1e-9 * p.area,
+                    "{area} vs {}",
+                    p.area
+                );
+            }
+            // k is the least that works, so no more patches than ceil(longest / size)^2.
+            let expected: usize = triangles
+                .iter()
+                .map(|&t| ((longest_edge(t) / patch_size).ceil().max(1.0) as usize).pow(2))
+                .sum();
+            assert_eq!(patches.patches.len(), expected);
+        }
+    }
+
+    #[test]
+    fn an_edge_that_is_a_multiple_of_the_patch_size_is_cut_exactly() {
+        let right = [
+            DVec3::ZERO,
+            DVec3::new(3.0, 0.0, 0.0),
+            DVec3::new(0.0, 3.0, 0.0),
+        ];
+        let scene = scene_of(vec![surface(&[right], false)], vec![]);
+        // Hypotenuse 3 sqrt(2): k = 5 at size 3 sqrt(2) / 5, 1 at its own length.
+        let hypotenuse = 3.0 * 2f64.sqrt();
+        assert_eq!(tessellate(&scene, hypotenuse).unwrap().patches.len(), 1);
+        assert_eq!(
+            tessellate(&scene, hypotenuse / 5.0).unwrap().patches.len(),
+            25
+        );
+        assert_eq!(tessellate(&scene, f64::INFINITY).unwrap().patches.len(), 1);
+    }
+
+    #[test]
+    fn patches_follow_the_winding_and_carry_the_surface() {
+        let triangles = random_triangles(11, 30);
+        let scene = scene_of(vec![surface(&triangles, false)], vec![]);
+        let patches = tessellate(&scene, 0.7).unwrap();
+        let mut next = 0;
+        for &[a, b, c] in &triangles {
+            let source_normal = (b - a).cross(c - a).normalize();
+            let k = (longest_edge([a, b, c]) / 0.7).ceil().max(1.0) as usize;
+            for p in &patches.patches[next..next + k * k] {
+                assert_eq!(p.normal, source_normal);
+                let [v0, v1, v2] = p.vertices;
+                let winding = (v1 - v0).cross(v2 - v0).normalize();
+                assert!(winding.dot(p.normal) > 1.0 - 1e-9);
+                assert_eq!(p.material, Some(0));
+                assert_eq!(p.emission, [0.25, 0.5, 1.0]);
+                assert_eq!(p.kind, PatchKind::Surface { surface: 0 });
+                assert!(!p.twin);
+            }
+            next += k * k;
+        }
+        assert_eq!(next, patches.patches.len());
+    }
+
+    #[test]
+    fn two_sided_surfaces_give_back_to_back_twins() {
+        let triangles = random_triangles(13, 9);
+        let one = tessellate(&scene_of(vec![surface(&triangles, false)], vec![]), 0.9).unwrap();
+        let two = tessellate(&scene_of(vec![surface(&triangles, true)], vec![]), 0.9).unwrap();
+        assert_eq!(two.patches.len(), 2 * one.patches.len());
+        for (front, pair) in one.patches.iter().zip(two.patches.chunks(2)) {
+            let (a, b) = (pair[0], pair[1]);
+            assert!(a.twin && b.twin);
+            assert_eq!(a.vertices, front.vertices);
+            let [v0, v1, v2] = a.vertices;
+            assert_eq!(b.vertices, [v0, v2, v1]);
+            assert_eq!(b.normal, -a.normal);
+            let [w0, w1, w2] = b.vertices;
+            assert!((w1 - w0).cross(w2 - w0).normalize().dot(b.normal) > 1.0 - 1e-9);
+            assert_eq!(
+                (b.area, b.material, b.emission),
+                (a.area, a.material, a.emission)
+            );
+        }
+    }
+
+    #[test]
+    fn square_light_grid_has_trapezoid_weights() {
+        let side = 0.8;
+        for n in [1u32, 2, 3, 5] {
+            let scene = scene_of(vec![], vec![square_light(side, n)]);
+            let patches = tessellate(&scene, 1e-3).unwrap();
+            let n = n as usize;
+            assert_eq!(patches.patches.len(), 2 * n * n);
+            assert_eq!(patches.samples.len(), (n + 1) * (n + 1));
+            let area = side * side;
+            let sum: f64 = patches.samples.iter().map(|s| s.weight).sum();
+            assert!((sum - area).abs() <= ROUNDING * area);
+            // Trapezoid rule on cells of h^2: h^2 inside, h^2 / 2 on an edge, and the four
+            // corners share h^2. With one diagonal per cell, the diagonal's two end corners
+            // touch two triangles (h^2 / 3) and the other two corners one (h^2 / 6).
+            let h2 = area / (n * n) as f64;
+            for (id, s) in patches.samples.iter().enumerate() {
+                let (i, j) = (id % (n + 1), id / (n + 1));
+                let (i_edge, j_edge) = (i == 0 || i == n, j == 0 || j == n);
+                let expected = match (i_edge, j_edge) {
+                    (false, false) => h2,
+                    (true, false) | (false, true) => h2 / 2.0,
+                    (true, true) if i == j => h2 / 3.0,
+                    (true, true) => h2 / 6.0,
+                };
+                assert!((s.weight - expected).abs() <= ROUNDING * h2, "({i}, {j})");
+                assert_eq!(s.normal, Some(DVec3::NEG_Y));
+                assert_eq!(s.strength, [10.0, 20.0, 30.0]);
+                assert_eq!(s.light, 0);
+            }
+            for p in &patches.patches {
+                assert!(p.normal.dot(DVec3::NEG_Y) > 1.0 - 1e-12);
+                assert_eq!(p.material, None);
+                assert_eq!(p.emission, [10.0, 20.0, 30.0]);
+                assert_eq!(p.kind, PatchKind::AreaLight { light: 0 });
+                assert!(!p.twin);
+                let corners = p
+                    .vertices
+                    .map(|v| patches.samples.iter().filter(|s| s.position == v).count());
+                assert_eq!(
+                    corners,
+                    [1, 1, 1],
+                    "patch vertices are the sample positions"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn one_cell_light_is_the_quads_own_two_triangles() {
+        let scene = scene_of(vec![], vec![square_light(1.0, 1)]);
+        let patches = tessellate(&scene, 0.1).unwrap();
+        let Light::Area {
+            vertices: [v0, v1, v2, v3],
+            ..
+        } = scene.lights[0]
+        else {
+            unreachable!()
+        };
+        assert_eq!(patches.patches[0].vertices, [v0, v1, v2]);
+        assert_eq!(patches.patches[1].vertices, [v0, v2, v3]);
+    }
+
+    #[test]
+    fn convex_quad_light_that_is_no_parallelogram() {
+        // A tilted trapezoid with one more skewed side, planar by construction.
+        let (e1, e2) = (DVec3::new(1.0, 0.2, 0.0), DVec3::new(0.0, 0.3, 1.0));
+        let origin = DVec3::new(-2.0, 3.0, 1.0);
+        let at = |x: f64, y: f64| origin + x * e1 + y * e2;
+        let vertices = [at(0.0, 0.0), at(2.0, 0.0), at(1.6, 1.1), at(0.3, 0.9)];
+        let [v0, v1, v2, v3] = vertices;
+        let area = triangle_area([v0, v1, v2]) + triangle_area([v0, v2, v3]);
+        let normal = e1.cross(e2).normalize();
+        for n in [1u32, 3, 4] {
+            let light = Light::Area {
+                vertices,
+                radiance: [1.0; 3],
+                subdivisions: n,
+            };
+            let patches = tessellate(&scene_of(vec![], vec![light]), 1.0).unwrap();
+            assert_eq!(patches.patches.len(), 2 * (n * n) as usize);
+            assert_eq!(patches.samples.len(), ((n + 1) * (n + 1)) as usize);
+            let weights: f64 = patches.samples.iter().map(|s| s.weight).sum();
+            let patch_area: f64 = patches.patches.iter().map(|p| p.area).sum();
+            assert!(
+                (weights - area).abs() <= ROUNDING * area,
+                "{weights} vs {area}"
+            );
+            assert!((patch_area - area).abs() <= ROUNDING * area);
+            for s in &patches.samples {
+                assert!(s.normal.unwrap().dot(normal) > 1.0 - 1e-12);
+                assert!((s.position - v0).dot(normal).abs() <= ROUNDING);
+                assert!(s.weight > 0.0);
+            }
+            for p in &patches.patches {
+                assert!(p.normal.dot(normal) > 1.0 - 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn point_light_is_one_sample() {
+        let light = Light::Point {
+            position: DVec3::new(1.0, 2.0, 3.0),
+            power: [5.0, 6.0, 7.0],
+        };
+        let patches =
+            tessellate(&scene_of(vec![], vec![square_light(1.0, 2), light]), 1.0).unwrap();
+        assert_eq!(patches.samples.len(), 10);
+        let sample = patches.samples[9];
+        assert_eq!(
+            sample,
+            LightSample {
+                position: DVec3::new(1.0, 2.0, 3.0),
+                normal: None,
+                strength: [5.0, 6.0, 7.0],
+                weight: 1.0,
+                light: 1,
+            }
+        );
+    }
+
+    #[test]
+    fn bad_patch_sizes_are_refused() {
+        let scene = scene_of(vec![surface(&random_triangles(3, 2), false)], vec![]);
+        for size in [0.0, -1.0, f64::NAN, f64::NEG_INFINITY] {
+            let error = tessellate(&scene, size).unwrap_err();
+            assert!(matches!(error, Error::Usage(_)), "{error}");
+        }
+    }
+
+    #[test]
+    fn too_many_patches_are_refused_before_allocating() {
+        let big = [DVec3::ZERO, DVec3::X, DVec3::Y];
+        let scene = scene_of(vec![surface(&[big], true)], vec![]);
+        // sqrt(2) / 1e-4 -> k = 14143, 2 k^2 = 4e8 > 2^27; and an absurd size saturates.
+        for size in [1e-4, 1e-300] {
+            let error = tessellate(&scene, size).unwrap_err();
+            assert!(error.to_string().contains("--patch-size"), "{error}");
+            assert!(error.is_usage());
+        }
+        // Light grids count too: 2 * 8193^2 is just over 2^27.
+        let light = |n| scene_of(vec![], vec![square_light(1.0, n)]);
+        for n in [8193, u32::MAX] {
+            let error = tessellate(&light(n), 1.0).unwrap_err();
+            assert!(error.to_string().contains("subdivisions"), "{error}");
+        }
+    }
+
+    #[test]
+    fn degenerate_triangles_are_refused() {
+        let flat = [DVec3::ZERO, DVec3::X, 2.0 * DVec3::X];
+        let scene = scene_of(vec![surface(&[flat], false)], vec![]);
+        let error = tessellate(&scene, 1.0).unwrap_err();
+        assert!(error.to_string().contains("triangle 0"), "{error}");
+        assert!(tessellate(&scene_of(vec![], vec![square_light(1.0, 0)]), 1.0).is_err());
+    }
+
+    #[test]
+    fn bounds_enclose_patches_and_samples() {
+        let cube_corner = [
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(0.0, 2.0, 0.0),
+        ];
+        let light = Light::Point {
+            position: DVec3::new(0.0, 0.0, 2.0),
+            power: [1.0; 3],
+        };
+        let patches = tessellate(
+            &scene_of(vec![surface(&[cube_corner], false)], vec![light]),
+            0.5,
+        )
+        .unwrap();
+        let (center, radius) = scene_bounds(&patches);
+        assert!((center - DVec3::ONE).length() <= ROUNDING);
+        assert!((radius - 3f64.sqrt()).abs() <= ROUNDING);
+        assert_eq!(scene_bounds(&Patches::default()), (DVec3::ZERO, 0.0));
+    }
+
+    /// The level-l Sierpinski set of SCENE_FORMAT.md, faces outward of their own
+    /// tetrahedra: just enough of the loader's shape to count patches.
+    fn sierpinski(center: DVec3, size: f64, level: u32) -> Vec<[DVec3; 3]> {
+        let (h, r) = (size * (2.0f64 / 3.0).sqrt(), size / 3f64.sqrt());
+        let base = |k: f64| {
+            let angle = 2.0 * std::f64::consts::PI * k / 3.0;
+            center + DVec3::new(r * angle.sin(), -h / 4.0, -r * angle.cos())
+        };
+        let mut tetrahedra = vec![[
+            center + DVec3::new(0.0, 0.75 * h, 0.0),
+            base(0.0),
+            base(1.0),
+            base(2.0),
+        ]];
+        for _ in 0..level {
+            tetrahedra = tetrahedra
+                .iter()
+                .flat_map(|t| (0..4).map(move |c| t.map(|v| 0.5 * (v + t[c]))))
+                .collect();
+        }
+        let mut triangles = Vec::with_capacity(4 * tetrahedra.len());
+        for t in &tetrahedra {
+            for opposite in 0..4 {
+                let [a, b, c] = [1, 2, 3].map(|o| t[(opposite + o) % 4]);
+                let outward = (b - a).cross(c - a).dot(a - t[opposite]) > 0.0;
+                triangles.push(if outward { [a, b, c] } else { [a, c, b] });
+            }
+        }
+        triangles
+    }
+
+    /// Reads the geometry of a scene file with plain TOML (the loader is not this module's).
+    pub(crate) fn scene_from_file(path: &std::path::Path) -> (Scene, f64) {
+        let text = std::fs::read_to_string(path).unwrap();
+        let table: toml::Table = text.parse().unwrap();
+        let number = |v: &toml::Value| v.as_float().or(v.as_integer().map(|i| i as f64)).unwrap();
+        let point = |v: &toml::Value| {
+            let a = v.as_array().unwrap();
+            DVec3::new(number(&a[0]), number(&a[1]), number(&a[2]))
+        };
+        let points = |v: &toml::Value| v.as_array().unwrap().iter().map(point).collect::<Vec<_>>();
+        let colour = |v: &toml::Value| point(v).as_vec3().to_array();
+        let mut surfaces = Vec::new();
+        for shape in table["shapes"].as_array().unwrap() {
+            let triangles = match shape["type"].as_str().unwrap() {
+                "triangle" => {
+                    let v = points(&shape["vertices"]);
+                    vec![[v[0], v[1], v[2]]]
+                }
+                "quad" => {
+                    let v = points(&shape["vertices"]);
+                    vec![[v[0], v[1], v[2]], [v[0], v[2], v[3]]]
+                }
+                "sierpinski" => sierpinski(
+                    point(&shape["center"]),
+                    number(&shape["size"]),
+                    shape["level"].as_integer().unwrap() as u32,
+                ),
+                other => panic!("shape type {other} is not read by this test"),
+            };
+            let two_sided = shape.get("two_sided").is_some_and(|v| v.as_bool().unwrap());
+            surfaces.push(surface(&triangles, two_sided));
+        }
+        let mut lights = Vec::new();
+        for light in table
+            .get("lights")
+            .and_then(|l| l.as_array())
+            .into_iter()
+            .flatten()
+        {
+            lights.push(match light["type"].as_str().unwrap() {
+                "point" => Light::Point {
+                    position: point(&light["position"]),
+                    power: colour(&light["power"]),
+                },
+                _ => {
+                    let v = points(&light["vertices"]);
+                    Light::Area {
+                        vertices: [v[0], v[1], v[2], v[3]],
+                        radiance: colour(&light["radiance"]),
+                        subdivisions: light
+                            .get("subdivisions")
+                            .map_or(1, |n| n.as_integer().unwrap() as u32),
+                    }
+                }
+            });
+        }
+        let patch_size = number(&table["settings"]["patch_size"]);
+        (scene_of(surfaces, lights), patch_size)
+    }
+
+    #[test]
+    fn sierpinski_scene_has_about_as_many_patches_as_the_papers() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/sierpinski.toml");
+        let (scene, patch_size) = scene_from_file(&path);
+        let start = std::time::Instant::now();
+        let patches = tessellate(&scene, patch_size).unwrap();
+        let elapsed = start.elapsed();
+        let stats = patches.stats();
+        println!("{stats:?} in {elapsed:?}");
+        assert!(
+            (20_000..=25_000).contains(&patches.patches.len()),
+            "{stats:?}"
+        );
+        assert_eq!(stats.light_patches, 8);
+        assert_eq!(stats.samples, 9);
+        let fractal = &scene.surfaces[6];
+        assert_eq!(fractal.triangles.len(), 4usize.pow(7));
+        let fractal_patches = patches
+            .patches
+            .iter()
+            .filter(|p| p.kind == PatchKind::Surface { surface: 6 })
+            .count();
+        assert_eq!(
+            fractal_patches,
+            fractal.triangles.len(),
+            "the fractal is never cut"
+        );
+        // The room is closed and faces inward: its patches' normals point at the centre.
+        let (center, radius) = scene_bounds(&patches);
+        assert!(radius > 0.0);
+        for p in patches
+            .patches
+            .iter()
+            .filter(|p| matches!(p.kind, PatchKind::Surface { surface: 0..6 }))
+        {
+            assert!((center - p.vertices[0]).dot(p.normal) > 0.0);
+        }
+    }
+
+    #[test]
+    fn stats_count_and_add_up() {
+        let triangles = random_triangles(5, 4);
+        let scene = scene_of(vec![surface(&triangles, true)], vec![square_light(0.5, 3)]);
+        let patches = tessellate(&scene, 2.0).unwrap();
+        let stats = patches.stats();
+        assert_eq!(stats.light_patches, 18);
+        assert_eq!(stats.surface_patches + 18, patches.patches.len());
+        assert_eq!(stats.samples, 16);
+        let area = 2.0 * triangles.iter().copied().map(triangle_area).sum::<f64>() + 0.25;
+        assert!((stats.total_area - area).abs() <= ROUNDING * area);
+    }
 }
