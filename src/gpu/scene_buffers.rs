@@ -101,21 +101,9 @@ pub fn gpu_samples(patches: &Patches) -> Vec<GpuLightSample> {
         .collect()
 }
 
-/// Bounding sphere (centre of the bounding box) of the patches and light samples.
+/// Bounding sphere of the patches and light samples, never of zero radius.
 pub fn bounding_sphere(patches: &Patches) -> (DVec3, f64) {
-    let points = patches.patches.iter().flat_map(|p| p.vertices).chain(patches.samples.iter().map(|s| s.position));
-    let (lo, hi) = points.fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(lo, hi), v| (lo.min(v), hi.max(v)));
-    if lo.x > hi.x {
-        return (DVec3::ZERO, 1.0);
-    }
-    let centre = (lo + hi) * 0.5;
-    let radius = patches
-        .patches
-        .iter()
-        .flat_map(|p| p.vertices)
-        .chain(patches.samples.iter().map(|s| s.position))
-        .map(|v| v.distance(centre))
-        .fold(0.0, f64::max);
+    let (centre, radius) = crate::scene::tessellate::scene_bounds(patches);
     (centre, radius.max(1e-9))
 }
 
