@@ -18,6 +18,7 @@ pub mod scene;
 pub use error::{Error, Result};
 pub mod gpu;
 pub mod image;
+pub mod iteration;
 pub mod layout;
 pub mod render;
 pub mod rng;

@@ -30,6 +30,12 @@ pub struct RenderOptions {
     /// Pixels along a full cube-face edge of the first shot's item buffers.
     pub hemicube_resolution: u32,
     pub light_window: LightWindow,
+    /// Pixels along each edge of a bundle's parallel projection.
+    pub bundle_resolution: u32,
+    /// Whether lights are first shot (else area lights are emitters in the iteration).
+    pub first_shot: bool,
+    /// Stop the iteration after this much wall time, if given.
+    pub time_limit: Option<std::time::Duration>,
 }
 
 impl RenderOptions {
@@ -42,6 +48,9 @@ impl RenderOptions {
             seed: scene.settings.seed,
             hemicube_resolution: scene.settings.hemicube_resolution,
             light_window: LightWindow::Hemicube,
+            bundle_resolution: scene.settings.bundle_resolution,
+            first_shot: true,
+            time_limit: None,
         }
     }
 }
@@ -63,6 +72,12 @@ pub struct RenderStats {
     pub first_shot_pairs: u32,
     pub first_shot_faces: usize,
     pub first_shot_ms: f64,
+    pub bundle_resolution: u32,
+    /// Fragment capacity of a bundle step (grown if a step ever needed more).
+    pub bundle_capacity: u32,
+    /// Median wall time of a step, measured over batches of steps.
+    pub iteration_ms_median: f64,
+    pub iteration_ms: f64,
     pub iterations: u32,
     pub seed: u64,
     pub tessellation_ms: f64,
@@ -118,19 +133,18 @@ fn milliseconds(since: Instant) -> f64 {
 pub fn render(ctx: &Context, scene: &Scene, patches: &Patches, options: &RenderOptions) -> Result<Rendered> {
     let start = Instant::now();
     check_limits(&ctx.limits(), patches, options)?;
-    if options.iterations > 0 {
-        return Err(Error::Usage(format!(
-            "--iterations {} asks for the stochastic iteration, which this build does not have yet; use --iterations 0",
-            options.iterations
-        )));
+    if !options.first_shot && scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Point { .. })) {
+        return Err(Error::Usage(
+            "--no-first-shot: the scene has point lights, which only the first shot can handle (a point has no area to emit from inside the iteration); drop --no-first-shot or replace them by small area lights".into(),
+        ));
     }
     let device = &ctx.device;
     let upload = Instant::now();
-    let mut buffers = SceneBuffers::new(device, scene, patches, true);
+    let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
     let camera = CameraItemBuffer::new(device, options.width, options.height);
     let upload_ms = milliseconds(upload);
 
-    let fs = if patches.samples.is_empty() {
+    let fs = if !options.first_shot || patches.samples.is_empty() {
         None
     } else {
         Some(first_shot::run(ctx, &mut buffers, patches, options.hemicube_resolution, options.light_window)?)
@@ -150,21 +164,14 @@ pub fn render(ctx: &Context, scene: &Scene, patches: &Patches, options: &RenderO
 
     let image_start = Instant::now();
     let near = buffers.radius * 1e-5;
-    let per_axis = DIRECT_CAMERA_SAMPLES_PER_AXIS;
-    let mut rng = StepRng::new(options.seed, u64::MAX);
-    for k in 0..per_axis * per_axis {
-        let jitter = [
-            ((k % per_axis) as f64 + rng.uniform()) / per_axis as f64,
-            ((k / per_axis) as f64 + rng.uniform()) / per_axis as f64,
-        ];
-        let cam = gpu_camera(&scene.camera, options.width, options.height, near, [jitter[0] as f32, jitter[1] as f32]);
-        ctx.queue.write_buffer(&camera.camera, 0, bytemuck::bytes_of(&cam));
-        let mut encoder = device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.direct_image") });
-        camera.record(&mut encoder, &buffers.vertices, buffers.patch_count);
-        estimate.record(&mut encoder);
-        ctx.queue.submit([encoder.finish()]);
-    }
+    let mut iteration_stats = IterationStats::default();
+    let camera_samples = if options.iterations == 0 {
+        direct_image(ctx, scene, options, &buffers, &camera, &estimate, near);
+        DIRECT_CAMERA_SAMPLES_PER_AXIS * DIRECT_CAMERA_SAMPLES_PER_AXIS
+    } else {
+        iteration_stats = iterate(ctx, scene, patches, options, &buffers, &camera, &estimate, near, start)?;
+        iteration_stats.steps
+    };
     let pixels = estimate.read_mean(device, &ctx.queue)?;
     let image_ms = milliseconds(image_start);
     Ok(Rendered {
@@ -176,19 +183,162 @@ pub fn render(ctx: &Context, scene: &Scene, patches: &Patches, options: &RenderO
             light_samples: patches.samples.len(),
             image: [options.width, options.height],
             patch_size: options.patch_size,
-            camera_samples: per_axis * per_axis,
+            camera_samples,
             first_shot: fs.is_some(),
             hemicube_resolution: options.hemicube_resolution,
             light_window: options.light_window,
             first_shot_pairs: fs.as_ref().map_or(0, |f| f.pairs),
             first_shot_faces: fs.as_ref().map_or(0, |f| f.faces),
             first_shot_ms: fs.as_ref().map_or(0.0, |f| f.ms),
-            iterations: 0,
+            bundle_resolution: options.bundle_resolution,
+            bundle_capacity: iteration_stats.capacity,
+            iteration_ms_median: iteration_stats.step_ms_median,
+            iteration_ms: iteration_stats.ms,
+            iterations: iteration_stats.steps,
             seed: options.seed,
             tessellation_ms: 0.0,
             upload_ms,
             image_ms,
             total_ms: milliseconds(start),
         },
+    })
+}
+
+/// An image without iteration: emission and first shot, averaged over a stratified grid of
+/// camera samples per pixel.
+fn direct_image(
+    ctx: &Context,
+    scene: &Scene,
+    options: &RenderOptions,
+    buffers: &SceneBuffers,
+    camera: &CameraItemBuffer,
+    estimate: &ImageEstimate,
+    near: f64,
+) {
+    let per_axis = DIRECT_CAMERA_SAMPLES_PER_AXIS;
+    let mut rng = StepRng::new(options.seed, u64::MAX);
+    for k in 0..per_axis * per_axis {
+        let jitter = [
+            ((k % per_axis) as f64 + rng.uniform()) / per_axis as f64,
+            ((k / per_axis) as f64 + rng.uniform()) / per_axis as f64,
+        ];
+        let cam = gpu_camera(&scene.camera, options.width, options.height, near, [jitter[0] as f32, jitter[1] as f32]);
+        ctx.queue.write_buffer(&camera.camera, 0, bytemuck::bytes_of(&cam));
+        let mut encoder =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.direct_image") });
+        camera.record(&mut encoder, &buffers.vertices, buffers.patch_count);
+        estimate.record(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+    }
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+struct IterationStats {
+    steps: u32,
+    capacity: u32,
+    step_ms_median: f64,
+    ms: f64,
+}
+
+/// Steps per batch between checks of the fragment overflow flag (each check waits for the GPU).
+const STEPS_PER_BATCH: u32 = 8;
+
+/// The stochastic iteration: `options.iterations` steps (or fewer if `time_limit` ends it),
+/// each adding one image estimate. Steps run in batches; the state and image sum are kept
+/// at each batch's start, so a batch in which a line ran out of fragment room is redone,
+/// exactly, with a larger list.
+#[allow(clippy::too_many_arguments)]
+fn iterate(
+    ctx: &Context,
+    scene: &Scene,
+    patches: &Patches,
+    options: &RenderOptions,
+    buffers: &SceneBuffers,
+    camera: &CameraItemBuffer,
+    estimate: &ImageEstimate,
+    near: f64,
+    run_start: Instant,
+) -> Result<IterationStats> {
+    let device = &ctx.device;
+    let started = Instant::now();
+    let resolution = options.bundle_resolution;
+    let mut capacity = crate::iteration::fragment_bound(patches, buffers.radius, resolution.max(4));
+    let mut iteration = crate::iteration::Iteration::new(ctx, buffers, resolution, capacity)?;
+    let copy = |encoder: &mut wgpu::CommandEncoder, from: &wgpu::Buffer, to: &wgpu::Buffer| {
+        encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
+    };
+    let backup = |b: &wgpu::Buffer, label: &str| {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: b.size(),
+            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    };
+    let state_backup = backup(&buffers.state, "firstshot.render.state_backup");
+    let image_backup = backup(&estimate.image_sum, "firstshot.render.image_backup");
+    ctx.queue.write_buffer(
+        &estimate.params,
+        0,
+        bytemuck::bytes_of(&GpuEstimateParams {
+            environment: [scene.environment[0], scene.environment[1], scene.environment[2], 0.0],
+            patch_count: buffers.patch_count,
+            use_state: 1,
+            _pad: [0; 2],
+        }),
+    );
+    let mut step = 0u32;
+    let mut batch_ms = Vec::new();
+    while step < options.iterations {
+        if let Some(limit) = options.time_limit
+            && run_start.elapsed() >= limit
+        {
+            break;
+        }
+        let batch_start = Instant::now();
+        let batch = STEPS_PER_BATCH.min(options.iterations - step);
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.snapshot") });
+        copy(&mut encoder, &buffers.state, &state_backup);
+        copy(&mut encoder, &estimate.image_sum, &image_backup);
+        iteration.clear_overflow(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+        for k in step..step + batch {
+            let (mut bundle, mut rng) =
+                crate::iteration::bundle_of_step(options.seed, k as u64, buffers.centre, buffers.radius, resolution);
+            bundle.environment = [scene.environment[0], scene.environment[1], scene.environment[2], 0.0];
+            bundle.patch_count = buffers.patch_count;
+            bundle.capacity = iteration.capacity;
+            bundle.use_state = (k > 0) as u32;
+            ctx.queue.write_buffer(&iteration.bundle, 0, bytemuck::bytes_of(&bundle));
+            let jitter = [rng.uniform() as f32, rng.uniform() as f32];
+            let cam = gpu_camera(&scene.camera, options.width, options.height, near, jitter);
+            ctx.queue.write_buffer(&camera.camera, 0, bytemuck::bytes_of(&cam));
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.step") });
+            iteration.record_step(&mut encoder, buffers);
+            camera.record(&mut encoder, &buffers.vertices, buffers.patch_count);
+            estimate.record(&mut encoder);
+            ctx.queue.submit([encoder.finish()]);
+        }
+        if iteration.overflowed(ctx)? {
+            // A line held more surfaces than the list had room for: restore the batch's
+            // start and redo it with twice the room.
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.restore") });
+            copy(&mut encoder, &state_backup, &buffers.state);
+            copy(&mut encoder, &image_backup, &estimate.image_sum);
+            ctx.queue.submit([encoder.finish()]);
+            capacity = capacity.saturating_mul(2);
+            iteration = crate::iteration::Iteration::new(ctx, buffers, resolution, capacity)?;
+            continue;
+        }
+        batch_ms.push(batch_start.elapsed().as_secs_f64() * 1e3 / batch as f64);
+        step += batch;
+    }
+    ctx.wait()?;
+    batch_ms.sort_by(f64::total_cmp);
+    Ok(IterationStats {
+        steps: step,
+        capacity: iteration.capacity,
+        step_ms_median: batch_ms.get(batch_ms.len() / 2).copied().unwrap_or(0.0),
+        ms: started.elapsed().as_secs_f64() * 1e3,
     })
 }

@@ -7,3 +7,7 @@ pub mod first_shot_reduce;
 pub mod first_shot_table;
 pub mod image_estimate;
 pub mod prefix_sum;
+pub mod bundle_finalize;
+pub mod bundle_reflect;
+pub mod bundle_transfer;
+pub mod bundle_visibility;

@@ -1,0 +1,161 @@
+//! Ray-bundle stochastic iteration (DESIGN.md 2): the buffers of one step and the order of
+//! its stages. Each step k draws its direction, grid rotation and sub-pixel offset from
+//! `StepRng(seed, k)`, so the state between steps is only J_j, win_j and the image sum.
+
+use crate::gpu::scene_buffers::SceneBuffers;
+use crate::gpu::{buffers, Context};
+use crate::layout::GpuBundle;
+use crate::rng::StepRng;
+use crate::scene::Patches;
+use crate::stages::bundle_finalize::BundleFinalize;
+use crate::stages::bundle_reflect::BundleReflect;
+use crate::stages::bundle_transfer::BundleTransfer;
+use crate::stages::bundle_visibility::BundleVisibility;
+use crate::stages::prefix_sum::PrefixSum;
+use crate::{Error, Result};
+use glam::DVec3;
+
+/// The bundle of step `step`: direction uniform on the sphere, grid rotated uniformly about
+/// it and shifted by a uniform sub-pixel offset; the grid covers the bounding sphere.
+pub fn bundle_of_step(seed: u64, step: u64, centre: DVec3, radius: f64, resolution: u32) -> (GpuBundle, StepRng) {
+    let mut rng = StepRng::new(seed, step);
+    let d = rng.direction();
+    let angle = 2.0 * std::f64::consts::PI * rng.uniform();
+    let t1 = d.any_orthonormal_vector();
+    let t2 = d.cross(t1);
+    let u = angle.cos() * t1 + angle.sin() * t2;
+    let v = d.cross(u);
+    // One pixel of margin on each side, so the shifted grid still covers the sphere.
+    let r = resolution as f64;
+    let half = radius * r / (r - 2.0);
+    let pixel = 2.0 * half / r;
+    let shift = [(rng.uniform() - 0.5) * 2.0 / r, (rng.uniform() - 0.5) * 2.0 / r];
+    let f = |v: DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
+    let bundle = GpuBundle {
+        direction: f(d, pixel * pixel),
+        axis_u: f(u / half, shift[0]),
+        axis_v: f(v / half, shift[1]),
+        centre: f(centre, 1.0 / radius),
+        environment: [0.0; 4],
+        resolution,
+        patch_count: 0,
+        capacity: 0,
+        use_state: 0,
+    };
+    (bundle, rng)
+}
+
+/// Fragments a step can produce at most: a triangle's projection holds at most
+/// area / dP + perimeter / pixel + 1 pixel centres, and projection only shrinks both.
+pub fn fragment_bound(patches: &Patches, radius: f64, resolution: u32) -> u64 {
+    let r = resolution as f64;
+    let pixel = 2.0 * radius * r / (r - 2.0) / r;
+    patches
+        .patches
+        .iter()
+        .map(|p| {
+            let [a, b, c] = p.vertices;
+            let perimeter = a.distance(b) + b.distance(c) + c.distance(a);
+            (p.area / (pixel * pixel) + perimeter / pixel + 1.0).ceil() as u64
+        })
+        .sum()
+}
+
+/// The buffers and stages of a step.
+pub struct Iteration {
+    pub bundle: wgpu::Buffer,
+    counts: wgpu::Buffer,
+    cursor: wgpu::Buffer,
+    max_bits: wgpu::Buffer,
+    overflow: wgpu::Buffer,
+    reflect: BundleReflect,
+    visibility: BundleVisibility,
+    scan: PrefixSum,
+    transfer: BundleTransfer,
+    finalize: BundleFinalize,
+    pub capacity: u32,
+    pub resolution: u32,
+    _owned: Vec<wgpu::Buffer>,
+}
+
+impl Iteration {
+    pub fn new(ctx: &Context, scene: &SceneBuffers, resolution: u32, capacity: u64) -> Result<Self> {
+        let device = &ctx.device;
+        let limits = ctx.limits();
+        if resolution < 4 || resolution > limits.max_texture_dimension_2d {
+            return Err(Error::Limits(format!(
+                "--bundle-resolution {resolution}: expected 4 to {} (the device's largest texture side)",
+                limits.max_texture_dimension_2d
+            )));
+        }
+        let max = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size) / 8;
+        if capacity > max {
+            return Err(Error::Limits(format!(
+                "a bundle step may need {capacity} fragments, more than one buffer of this device holds ({max}); use a smaller --bundle-resolution or a larger --patch-size"
+            )));
+        }
+        let lines = resolution * resolution;
+        let n = scene.patch_count as u64;
+        let none = wgpu::BufferUsages::empty();
+        let bundle = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("firstshot.iteration.bundle"),
+            size: std::mem::size_of::<GpuBundle>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let outgoing = buffers::storage_zeroed(device, "firstshot.iteration.outgoing", 16 * n, none);
+        let max_bits = buffers::storage_zeroed(device, "firstshot.iteration.max_bits", 16, none);
+        let counts = buffers::storage_zeroed(device, "firstshot.iteration.counts", 4 * (lines as u64 + 1), none);
+        let offsets = buffers::storage_zeroed(device, "firstshot.iteration.offsets", 4 * (lines as u64 + 1), none);
+        let cursor = buffers::storage_zeroed(device, "firstshot.iteration.cursor", 4 * lines as u64, none);
+        let fragments = buffers::storage_zeroed(device, "firstshot.iteration.fragments", 8 * capacity.max(1), none);
+        let overflow = buffers::storage_zeroed(device, "firstshot.iteration.overflow", 4, wgpu::BufferUsages::COPY_SRC);
+        let sums = buffers::storage_zeroed(device, "firstshot.iteration.sums", 24 * n, none);
+        Ok(Iteration {
+            reflect: BundleReflect::new(device, scene, &bundle, &outgoing, &max_bits),
+            visibility: BundleVisibility::new(device, [&bundle, &counts, &offsets, &cursor, &fragments, &overflow], resolution),
+            scan: PrefixSum::new(device, lines + 1, &counts, &offsets),
+            transfer: BundleTransfer::new(
+                device,
+                [&bundle, &scene.patches, &offsets, &fragments, &outgoing, &sums, &max_bits],
+                lines,
+            ),
+            finalize: BundleFinalize::new(
+                device,
+                [&bundle, &scene.patches, &sums, &max_bits, &outgoing, &scene.state],
+                scene.patch_count,
+            ),
+            bundle,
+            counts,
+            cursor,
+            max_bits,
+            overflow,
+            capacity: capacity as u32,
+            resolution,
+            _owned: vec![outgoing, offsets, fragments, sums],
+        })
+    }
+
+    /// Records one step (its bundle uniform must already be written): J_j and win_j of
+    /// every patch are replaced by this step's.
+    pub fn record_step(&self, encoder: &mut wgpu::CommandEncoder, scene: &SceneBuffers) {
+        encoder.clear_buffer(&self.max_bits, 0, None);
+        encoder.clear_buffer(&self.counts, 0, None);
+        encoder.clear_buffer(&self.cursor, 0, None);
+        self.reflect.record(encoder);
+        self.visibility.record_count(encoder, &scene.vertices, scene.patch_count);
+        self.scan.record(encoder);
+        self.visibility.record_fill(encoder, &scene.vertices, scene.patch_count);
+        self.transfer.record(encoder);
+        self.finalize.record(encoder);
+    }
+
+    /// Whether any step since the last `clear_overflow` ran out of fragment room.
+    pub fn overflowed(&self, ctx: &Context) -> Result<bool> {
+        Ok(buffers::read_back::<u32>(&ctx.device, &ctx.queue, &self.overflow, 4)?[0] != 0)
+    }
+
+    pub fn clear_overflow(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.clear_buffer(&self.overflow, 0, None);
+    }
+}

@@ -1,0 +1,112 @@
+//! Bundle visibility (`wgsl/bundle_visibility.wgsl`): every surface on every line of the
+//! bundle's grid, by a counting pass, a prefix sum and a filling pass.
+
+use crate::gpu::kernel;
+use crate::layout::GpuBundle;
+use crate::stages::camera_item_buffer::raster_vertex_layout;
+
+pub struct BundleVisibility {
+    count: wgpu::RenderPipeline,
+    fill: wgpu::RenderPipeline,
+    bind_group: wgpu::BindGroup,
+    depth_view: wgpu::TextureView,
+}
+
+impl BundleVisibility {
+    /// `buffers`: bundle, counts, offsets, cursor, fragments, overflow.
+    pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 6], resolution: u32) -> Self {
+        let stages = wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT;
+        let layout = kernel::buffer_layout(
+            device,
+            "firstshot.bundle_visibility.layout",
+            stages,
+            &[
+                (true, true, std::mem::size_of::<GpuBundle>() as u64),
+                (false, false, 4),
+                (false, true, 4),
+                (false, false, 4),
+                (false, false, 8),
+                (false, false, 4),
+            ],
+        );
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("firstshot.bundle_visibility.pipeline_layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let module = kernel::module(device, "bundle_visibility");
+        let pipeline = |entry: &str| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(&format!("firstshot.bundle_visibility.{entry}")),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(raster_vertex_layout())],
+                },
+                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+                // Only so that the pass has an attachment: every fragment must run.
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: wgpu::TextureFormat::Depth32Float,
+                    depth_write_enabled: Some(false),
+                    depth_compare: Some(wgpu::CompareFunction::Always),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    targets: &[],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let depth = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("firstshot.bundle_visibility.depth"),
+            size: wgpu::Extent3d { width: resolution, height: resolution, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Depth32Float,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            view_formats: &[],
+        });
+        BundleVisibility {
+            count: pipeline("fs_count"),
+            fill: pipeline("fs_fill"),
+            bind_group: kernel::buffer_bind_group(device, "firstshot.bundle_visibility.bind_group", &layout, &buffers),
+            depth_view: depth.create_view(&Default::default()),
+        }
+    }
+
+    fn record(&self, encoder: &mut wgpu::CommandEncoder, pipeline: &wgpu::RenderPipeline, label: &str, vertices: &wgpu::Buffer, patch_count: u32) {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some(label),
+            color_attachments: &[],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth_view,
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_vertex_buffer(0, vertices.slice(..));
+        pass.draw(0..patch_count * 3, 0..1);
+    }
+
+    pub fn record_count(&self, encoder: &mut wgpu::CommandEncoder, vertices: &wgpu::Buffer, patch_count: u32) {
+        self.record(encoder, &self.count, "firstshot.bundle_visibility.count", vertices, patch_count);
+    }
+
+    pub fn record_fill(&self, encoder: &mut wgpu::CommandEncoder, vertices: &wgpu::Buffer, patch_count: u32) {
+        self.record(encoder, &self.fill, "firstshot.bundle_visibility.fill", vertices, patch_count);
+    }
+}
