@@ -1,1 +1,413 @@
 //! Shapes -> triangles: quad, triangle, box, sierpinski, OBJ mesh, and their transforms.
+//!
+//! Every triangle produced here runs counter-clockwise seen from its front, so that its
+//! normal (v1 - v0) x (v2 - v0) points out of closed shapes. `load` attaches materials and
+//! runs `check_polygon` on what comes out, after the transform, on the geometry the renderer
+//! will actually see.
+
+use glam::{DQuat, DVec3};
+use std::f64::consts::TAU;
+use std::fmt;
+
+/// Largest distance of a vertex of a shape quad or an OBJ face from the polygon's plane, as
+/// a fraction of the polygon's size. Loose, because such a polygon is rendered as its fan
+/// of triangles anyway: it only catches a mistyped coordinate. The Cornell box's measured
+/// left wall is 1e-3 off its plane and must load.
+pub const POLYGON_PLANARITY: f64 = 1e-2;
+
+/// The same for area lights, whose light samples assume one plane (SCENE_FORMAT.md: "planar
+/// within 1e-4 of its size").
+pub const LIGHT_PLANARITY: f64 = 1e-4;
+
+/// A triangle whose area is at most this fraction of its polygon's squared size has "zero
+/// area": far above f64 rounding of the cross product (about 1e-16), far below any triangle a
+/// person means to draw.
+pub const ZERO_AREA: f64 = 1e-12;
+
+/// The deepest Sierpinski level: level l has 4^l tetrahedra, 4^(l+1) triangles.
+pub const MAX_SIERPINSKI_LEVEL: u32 = 8;
+
+/// Largest coordinate magnitude: geometry is uploaded as f32.
+pub const MAX_COORDINATE: f64 = f32::MAX as f64;
+
+/// `transform = { scale, rotate, translate }`: scale, then rotate, then translate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transform {
+    /// Every component > 0, so a transform never mirrors and winding is kept.
+    pub scale: DVec3,
+    pub rotation: DQuat,
+    pub translation: DVec3,
+}
+
+impl Default for Transform {
+    fn default() -> Self {
+        Transform::IDENTITY
+    }
+}
+
+impl Transform {
+    pub const IDENTITY: Transform = Transform {
+        scale: DVec3::ONE,
+        rotation: DQuat::IDENTITY,
+        translation: DVec3::ZERO,
+    };
+
+    /// `rotate = [axis_x, axis_y, axis_z, degrees]`: right-handed (counter-clockwise seen from
+    /// the tip of the axis) about the axis through the origin. `None` for a zero axis.
+    pub fn rotation(axis: DVec3, degrees: f64) -> Option<DQuat> {
+        let axis = axis.try_normalize()?;
+        Some(DQuat::from_axis_angle(axis, degrees.to_radians()))
+    }
+
+    pub fn apply(&self, p: DVec3) -> DVec3 {
+        self.rotation * (self.scale * p) + self.translation
+    }
+
+    pub fn apply_triangle(&self, t: [DVec3; 3]) -> [DVec3; 3] {
+        t.map(|p| self.apply(p))
+    }
+}
+
+/// A quad split into (v0, v1, v2) and (v0, v2, v3).
+pub fn quad(v: [DVec3; 4]) -> [[DVec3; 3]; 2] {
+    [[v[0], v[1], v[2]], [v[0], v[2], v[3]]]
+}
+
+/// A polygon split into the fan (v0, v_i, v_i+1); right for the convex polygons that
+/// `check_polygon` lets through.
+pub fn fan(polygon: &[DVec3]) -> impl Iterator<Item = [DVec3; 3]> + '_ {
+    polygon
+        .windows(2)
+        .skip(1)
+        .map(move |w| [polygon[0], w[0], w[1]])
+}
+
+/// The closed axis-aligned box [min, max]: 12 triangles facing outward.
+pub fn box_triangles(min: DVec3, max: DVec3) -> Vec<[DVec3; 3]> {
+    let corner = |a: usize, at_max: bool, u: f64, v: f64| {
+        // (a, a+1, a+2) is a cyclic permutation of (x, y, z), so e_u x e_v = e_a.
+        let mut p = DVec3::ZERO;
+        p[a] = if at_max { max[a] } else { min[a] };
+        p[(a + 1) % 3] = if u > 0.5 {
+            max[(a + 1) % 3]
+        } else {
+            min[(a + 1) % 3]
+        };
+        p[(a + 2) % 3] = if v > 0.5 {
+            max[(a + 2) % 3]
+        } else {
+            min[(a + 2) % 3]
+        };
+        p
+    };
+    let mut out = Vec::with_capacity(12);
+    for a in 0..3 {
+        // Counter-clockwise in (u, v) faces +a: right for the max side, reversed for the min.
+        let ccw = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)];
+        let top = ccw.map(|(u, v)| corner(a, true, u, v));
+        let mut bottom = ccw.map(|(u, v)| corner(a, false, u, v));
+        bottom.reverse();
+        out.extend(quad(top));
+        out.extend(quad(bottom));
+    }
+    out
+}
+
+/// The Sierpinski tetrahedron of SCENE_FORMAT.md: 4^level regular tetrahedra, 4 outward
+/// triangles each. A level above `MAX_SIERPINSKI_LEVEL` (which the loader refuses) is
+/// clamped to it rather than allocating 4^level tetrahedra.
+pub fn sierpinski(center: DVec3, size: f64, level: u32) -> Vec<[DVec3; 3]> {
+    let h = size * (2.0f64 / 3.0).sqrt();
+    let r = size / 3.0f64.sqrt();
+    let base = |k: f64| {
+        let t = TAU * k / 3.0;
+        center + DVec3::new(r * t.sin(), -h / 4.0, -r * t.cos())
+    };
+    let apex = center + DVec3::new(0.0, 0.75 * h, 0.0);
+    let mut tetrahedra = vec![[apex, base(0.0), base(1.0), base(2.0)]];
+    for _ in 0..level.min(MAX_SIERPINSKI_LEVEL) {
+        tetrahedra = tetrahedra
+            .iter()
+            .flat_map(|t| (0..4).map(move |c| t.map(|q| (t[c] + q) * 0.5)))
+            .collect();
+    }
+    // (b0, b1, b2) faces down, away from the apex (checked by the tests); the other three
+    // faces follow from the tetrahedron's orientation.
+    tetrahedra
+        .iter()
+        .flat_map(|&[a, b0, b1, b2]| [[a, b1, b0], [a, b0, b2], [a, b2, b1], [b0, b1, b2]])
+        .collect()
+}
+
+/// Twice the triangle's area.
+fn double_area(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    (b - a).cross(c - a).length()
+}
+
+/// Why a polygon cannot be rendered as its fan of triangles.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PolygonProblem {
+    /// Fewer than 3 vertices.
+    TooFew(usize),
+    /// A coordinate is non-finite or beyond the f32 range (after a transform).
+    OutOfRange { vertex: usize },
+    /// The fan triangle of these vertices has zero area.
+    ZeroArea { vertices: [usize; 3] },
+    /// A vertex lies `distance` from the polygon's plane, more than `tolerance` x `size`.
+    NotPlanar {
+        vertex: usize,
+        distance: f64,
+        size: f64,
+        tolerance: f64,
+    },
+    /// The boundary turns the wrong way at this vertex, or winds around more than once.
+    NotConvex { vertex: usize },
+}
+
+impl fmt::Display for PolygonProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            PolygonProblem::TooFew(n) => write!(f, "a polygon needs at least 3 vertices, got {n}"),
+            PolygonProblem::OutOfRange { vertex } => write!(
+                f,
+                "vertex {vertex} is out of range (beyond {MAX_COORDINATE:e}, the f32 range the GPU works in)"
+            ),
+            PolygonProblem::ZeroArea {
+                vertices: [a, b, c],
+            } => write!(
+                f,
+                "degenerate: the triangle of vertices {a}, {b}, {c} has zero area (they coincide or lie on one line)"
+            ),
+            PolygonProblem::NotPlanar {
+                vertex,
+                distance,
+                size,
+                tolerance,
+            } => write!(
+                f,
+                "not planar: vertex {vertex} lies {distance:.6e} from the polygon's plane, more than {tolerance:e} of its size {size:.6e}"
+            ),
+            PolygonProblem::NotConvex { vertex } => write!(
+                f,
+                "not convex at vertex {vertex}: list the vertices in order around a convex boundary, or split the polygon into triangles"
+            ),
+        }
+    }
+}
+
+/// Checks that a polygon (vertices in order, counter-clockwise from its front) is finite,
+/// convex, planar within `planarity` of its size (the diagonal of its bounding box), and
+/// that none of the triangles of its fan has zero area. A triangle needs only the last.
+pub fn check_polygon(p: &[DVec3], planarity: f64) -> Result<(), PolygonProblem> {
+    let n = p.len();
+    if n < 3 {
+        return Err(PolygonProblem::TooFew(n));
+    }
+    if let Some(vertex) = p
+        .iter()
+        .position(|v| !v.is_finite() || v.abs().max_element() > MAX_COORDINATE)
+    {
+        return Err(PolygonProblem::OutOfRange { vertex });
+    }
+    let (lo, hi) = p
+        .iter()
+        .fold((p[0], p[0]), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let size = (hi - lo).length();
+    // Coordinates near f32::MAX overflow f64 squares; such a polygon is out of range.
+    if !size.is_finite() || !(size * size).is_finite() {
+        return Err(PolygonProblem::OutOfRange { vertex: 0 });
+    }
+    let min_double_area = 2.0 * ZERO_AREA * size * size;
+    for i in 1..n - 1 {
+        let area = double_area(p[0], p[i], p[i + 1]);
+        if area.is_nan() || area <= min_double_area {
+            return Err(PolygonProblem::ZeroArea {
+                vertices: [0, i, i + 1],
+            });
+        }
+    }
+    if n == 3 {
+        return Ok(());
+    }
+
+    // Newell's normal: the polygon's area vector, well defined even when slightly warped.
+    let centroid = p.iter().sum::<DVec3>() / n as f64;
+    let area_vector: DVec3 = (0..n)
+        .map(|i| (p[i] - centroid).cross(p[(i + 1) % n] - centroid))
+        .sum();
+    let Some(normal) = area_vector.try_normalize() else {
+        return Err(PolygonProblem::ZeroArea {
+            vertices: [0, 1, 2],
+        });
+    };
+    for (vertex, &v) in p.iter().enumerate() {
+        let distance = (v - centroid).dot(normal).abs();
+        if distance > planarity * size {
+            return Err(PolygonProblem::NotPlanar {
+                vertex,
+                distance,
+                size,
+                tolerance: planarity,
+            });
+        }
+    }
+
+    // Convex: no corner turns clockwise (straight corners are allowed), and the turns add up
+    // to one full turn, which rules out star polygons whose corners all turn the same way.
+    let mut turning = 0.0;
+    let in_plane = |e: DVec3| e - normal * e.dot(normal);
+    for i in 0..n {
+        let e1 = in_plane(p[i] - p[(i + n - 1) % n]);
+        let e2 = in_plane(p[(i + 1) % n] - p[i]);
+        let sine = e1.cross(e2).dot(normal);
+        if sine < -min_double_area {
+            return Err(PolygonProblem::NotConvex { vertex: i });
+        }
+        turning += sine.max(0.0).atan2(e1.dot(e2));
+    }
+    if (turning - TAU).abs() > 1e-6 {
+        return Err(PolygonProblem::NotConvex { vertex: 0 });
+    }
+    Ok(())
+}
+
+/// A parsed Wavefront OBJ file: positions and polygonal faces; everything else is ignored.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Obj {
+    pub positions: Vec<DVec3>,
+    pub faces: Vec<ObjFace>,
+    /// Every face's vertex indices (0-based, into `positions`), face after face.
+    pub indices: Vec<usize>,
+}
+
+/// One `f` statement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjFace {
+    /// 1-based line of the `f` statement, for messages.
+    pub line: usize,
+    /// What the closest `usemtl` above resolved to; `None` before the first `usemtl`.
+    pub material: Option<u32>,
+    /// `indices[first..first + count]` are its vertices.
+    pub first: usize,
+    pub count: usize,
+}
+
+impl Obj {
+    pub fn face_indices(&self, face: &ObjFace) -> &[usize] {
+        &self.indices[face.first..face.first + face.count]
+    }
+}
+
+/// A problem at a line of an OBJ file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjError {
+    pub line: usize,
+    pub message: String,
+}
+
+/// Parses the `v`, `f` and `usemtl` statements of an OBJ file; other statements (`vt`, `vn`,
+/// `o`, `g`, `s`, `mtllib`, ...) are ignored. Face vertices may be written `v`, `v/vt`,
+/// `v//vn` or `v/vt/vn`, with 1-based or negative (relative) indices. `material` resolves a
+/// `usemtl` name, or says why it cannot.
+pub fn parse_obj(
+    text: &str,
+    mut material: impl FnMut(&str) -> Result<u32, String>,
+) -> Result<Obj, ObjError> {
+    let mut obj = Obj::default();
+    let mut current = None;
+    for (index, raw) in text.lines().enumerate() {
+        let line = index + 1;
+        let err = |message: String| ObjError { line, message };
+        let content = raw.split('#').next().unwrap_or("");
+        let mut tokens = content.split_whitespace();
+        match tokens.next() {
+            Some("v") => {
+                let mut xyz = [0.0; 3];
+                for (k, slot) in xyz.iter_mut().enumerate() {
+                    let Some(token) = tokens.next() else {
+                        return Err(err(format!(
+                            "expected 3 numbers after `v` (x y z), got {k}"
+                        )));
+                    };
+                    *slot = obj_number(token).map_err(err)?;
+                }
+                obj.positions.push(DVec3::from_array(xyz));
+            }
+            Some("f") => {
+                let first = obj.indices.len();
+                for token in tokens {
+                    let index = obj_index(token, obj.positions.len()).map_err(err)?;
+                    obj.indices.push(index);
+                }
+                let count = obj.indices.len() - first;
+                if count < 3 {
+                    return Err(err(format!(
+                        "a face needs at least 3 vertices, got {count}"
+                    )));
+                }
+                obj.faces.push(ObjFace {
+                    line,
+                    material: current,
+                    first,
+                    count,
+                });
+            }
+            Some("usemtl") => {
+                let name = content
+                    .trim_start()
+                    .strip_prefix("usemtl")
+                    .unwrap_or("")
+                    .trim();
+                if name.is_empty() {
+                    return Err(err("expected a material name after `usemtl`".into()));
+                }
+                current = Some(material(name).map_err(err)?);
+            }
+            _ => {}
+        }
+    }
+    // Positive indices may refer to vertices defined further down, so they are checked last.
+    let defined = obj.positions.len();
+    for face in &obj.faces {
+        if let Some(&bad) = obj.face_indices(face).iter().find(|&&i| i >= defined) {
+            return Err(ObjError {
+                line: face.line,
+                message: format!(
+                    "vertex {} does not exist (the file defines {defined})",
+                    bad + 1
+                ),
+            });
+        }
+    }
+    Ok(obj)
+}
+
+fn obj_number(token: &str) -> Result<f64, String> {
+    let x: f64 = token
+        .parse()
+        .map_err(|_| format!("expected a number, got `{token}`"))?;
+    if !x.is_finite() || x.abs() > MAX_COORDINATE {
+        return Err(format!(
+            "expected a finite number within ±{MAX_COORDINATE:e}, got `{token}`"
+        ));
+    }
+    Ok(x)
+}
+
+/// One face vertex `v[/vt][/vn]` -> 0-based position index. `defined` positions precede it.
+fn obj_index(token: &str, defined: usize) -> Result<usize, String> {
+    let v = token.split('/').next().unwrap_or("");
+    let i: i64 = v.parse().map_err(|_| {
+        format!("expected a vertex index (v, v/vt, v//vn or v/vt/vn), got `{token}`")
+    })?;
+    match i {
+        0 => Err("vertex index 0 (OBJ indices start at 1; negative ones count back)".into()),
+        i if i > 0 => usize::try_from(i - 1).map_err(|_| format!("vertex index {i} is too large")),
+        i => usize::try_from(i.unsigned_abs())
+            .ok()
+            .and_then(|back| defined.checked_sub(back))
+            .ok_or_else(|| {
+                format!("relative vertex index {i} reaches before the first vertex ({defined} defined so far)")
+            }),
+    }
+}
