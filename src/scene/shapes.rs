@@ -235,10 +235,9 @@ pub fn check_polygon(p: &[DVec3], planarity: f64) -> Result<(), PolygonProblem> 
     let area_vector: DVec3 = (0..n)
         .map(|i| (p[i] - centroid).cross(p[(i + 1) % n] - centroid))
         .sum();
+    // Its fan triangles have area, so a polygon with no net area crosses itself (a bow tie).
     let Some(normal) = area_vector.try_normalize() else {
-        return Err(PolygonProblem::ZeroArea {
-            vertices: [0, 1, 2],
-        });
+        return Err(PolygonProblem::NotConvex { vertex: 0 });
     };
     for (vertex, &v) in p.iter().enumerate() {
         let distance = (v - centroid).dot(normal).abs();
@@ -409,5 +408,349 @@ fn obj_index(token: &str, defined: usize) -> Result<usize, String> {
             .ok_or_else(|| {
                 format!("relative vertex index {i} reaches before the first vertex ({defined} defined so far)")
             }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Rounding tolerance for sums over at most a few thousand f64 triangles of unit size.
+    const EPS: f64 = 1e-9;
+
+    fn cross(t: &[DVec3; 3]) -> DVec3 {
+        (t[1] - t[0]).cross(t[2] - t[0])
+    }
+
+    fn area(ts: &[[DVec3; 3]]) -> f64 {
+        ts.iter().map(|t| cross(t).length() / 2.0).sum()
+    }
+
+    /// Divergence theorem: the volume a closed, outward-facing surface encloses.
+    fn volume(ts: &[[DVec3; 3]]) -> f64 {
+        ts.iter()
+            .map(|t| ((t[0] + t[1] + t[2]) / 3.0).dot(cross(t)) / 6.0)
+            .sum()
+    }
+
+    #[test]
+    fn quad_splits_along_v0_v2() {
+        let v = [DVec3::X, DVec3::Y, DVec3::Z, DVec3::ONE];
+        assert_eq!(quad(v), [[v[0], v[1], v[2]], [v[0], v[2], v[3]]]);
+        let pentagon: Vec<DVec3> = (0..5).map(|i| DVec3::splat(i as f64)).collect();
+        let f: Vec<_> = fan(&pentagon).collect();
+        assert_eq!(f.len(), 3);
+        assert_eq!(f[2], [pentagon[0], pentagon[3], pentagon[4]]);
+    }
+
+    #[test]
+    fn box_is_closed_and_faces_outward() {
+        let (min, max) = (DVec3::new(-1.0, 2.0, 0.5), DVec3::new(2.0, 3.0, 4.5));
+        let d = max - min;
+        let ts = box_triangles(min, max);
+        assert_eq!(ts.len(), 12);
+        assert!((area(&ts) - 2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)).abs() < EPS);
+        assert!((volume(&ts) - d.x * d.y * d.z).abs() < EPS);
+        let middle = (min + max) / 2.0;
+        for t in &ts {
+            let n = cross(t).normalize();
+            assert!(
+                (n.abs().max_element() - 1.0).abs() < EPS,
+                "not axis-aligned: {n}"
+            );
+            assert!(
+                n.dot((t[0] + t[1] + t[2]) / 3.0 - middle) > 0.0,
+                "inward: {t:?}"
+            );
+            assert!(check_polygon(t, POLYGON_PLANARITY).is_ok());
+        }
+    }
+
+    #[test]
+    fn sierpinski_level_0_is_the_regular_tetrahedron_of_the_format() {
+        let (center, a) = (DVec3::new(1.0, -2.0, 3.0), 2.0);
+        let ts = sierpinski(center, a, 0);
+        assert_eq!(ts.len(), 4);
+        let h = a * (2.0f64 / 3.0).sqrt();
+        let apex = center + DVec3::new(0.0, 0.75 * h, 0.0);
+        assert!(ts.iter().flatten().any(|&p| p.distance(apex) < EPS));
+        for t in &ts {
+            for k in 0..3 {
+                assert!((t[k].distance(t[(k + 1) % 3]) - a).abs() < EPS);
+            }
+        }
+        let corners: DVec3 = ts[3].iter().sum::<DVec3>() + apex;
+        assert!(
+            corners.distance(4.0 * center) < EPS,
+            "centroid is not center"
+        );
+        // The base faces down.
+        assert!(cross(&ts[3]).normalize().distance(DVec3::NEG_Y) < EPS);
+    }
+
+    #[test]
+    fn sierpinski_levels_halve_the_volume_and_face_outward() {
+        let (center, a) = (DVec3::new(0.5, 0.0, -1.0), 3.0f64);
+        let v0 = a.powi(3) / (6.0 * 2.0f64.sqrt());
+        for level in 0..=3 {
+            let ts = sierpinski(center, a, level);
+            assert_eq!(ts.len(), 4usize.pow(level + 1));
+            let expected = v0 * 0.5f64.powi(level as i32);
+            assert!((volume(&ts) - expected).abs() < EPS * v0, "level {level}");
+            for tetrahedron in ts.chunks(4) {
+                let inside = tetrahedron.iter().flatten().sum::<DVec3>() / 12.0;
+                assert!((volume(tetrahedron) - v0 / 8.0f64.powi(level as i32)).abs() < EPS * v0);
+                for t in tetrahedron {
+                    let outward = (t[0] + t[1] + t[2]) / 3.0 - inside;
+                    assert!(cross(t).dot(outward) > 0.0, "level {level}: inward {t:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn sierpinski_clamps_the_level_instead_of_allocating() {
+        assert_eq!(sierpinski(DVec3::ZERO, 1.0, 50).len(), 4usize.pow(9));
+    }
+
+    #[test]
+    fn transform_scales_then_rotates_then_translates() {
+        let t = Transform {
+            scale: DVec3::new(2.0, 3.0, 1.0),
+            rotation: Transform::rotation(DVec3::new(0.0, 0.0, 5.0), 90.0).unwrap(),
+            translation: DVec3::new(1.0, 0.0, 0.0),
+        };
+        // x scaled to 2, turned right-handed about +z onto +y, then moved along x.
+        assert!(t.apply(DVec3::X).distance(DVec3::new(1.0, 2.0, 0.0)) < EPS);
+        assert!(t.apply(DVec3::Y).distance(DVec3::new(-2.0, 0.0, 0.0)) < EPS);
+        assert!(Transform::rotation(DVec3::ZERO, 10.0).is_none());
+        // A positive scale keeps winding: the transformed box still encloses +volume.
+        let ts: Vec<_> = box_triangles(DVec3::ZERO, DVec3::ONE)
+            .into_iter()
+            .map(|tri| t.apply_triangle(tri))
+            .collect();
+        assert!((volume(&ts) - 6.0).abs() < EPS);
+    }
+
+    fn square() -> Vec<DVec3> {
+        vec![DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y]
+    }
+
+    #[test]
+    fn convex_planar_polygons_pass() {
+        assert_eq!(check_polygon(&square(), LIGHT_PLANARITY), Ok(()));
+        let pentagon: Vec<DVec3> = (0..5)
+            .map(|k| {
+                let t = TAU * k as f64 / 5.0;
+                DVec3::new(t.cos(), t.sin(), 0.0)
+            })
+            .collect();
+        assert_eq!(check_polygon(&pentagon, LIGHT_PLANARITY), Ok(()));
+        // A straight corner (at v0) that no fan triangle spans is allowed.
+        let straight = [DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::NEG_X];
+        assert_eq!(check_polygon(&straight, LIGHT_PLANARITY), Ok(()));
+    }
+
+    #[test]
+    fn cornell_left_wall_is_planar_enough_for_a_shape_not_for_a_light() {
+        let wall = [
+            DVec3::new(552.8, 0.0, 0.0),
+            DVec3::new(549.6, 0.0, 559.2),
+            DVec3::new(556.0, 548.8, 559.2),
+            DVec3::new(556.0, 548.8, 0.0),
+        ];
+        assert_eq!(check_polygon(&wall, POLYGON_PLANARITY), Ok(()));
+        assert!(matches!(
+            check_polygon(&wall, LIGHT_PLANARITY),
+            Err(PolygonProblem::NotPlanar { .. })
+        ));
+    }
+
+    #[test]
+    fn bad_polygons_are_named() {
+        let mut bow_tie = square();
+        bow_tie.swap(2, 3);
+        assert!(matches!(
+            check_polygon(&bow_tie, POLYGON_PLANARITY),
+            Err(PolygonProblem::NotConvex { .. })
+        ));
+        let pentagram: Vec<DVec3> = (0..5)
+            .map(|k| {
+                let t = TAU * (2 * k) as f64 / 5.0;
+                DVec3::new(t.cos(), t.sin(), 0.0)
+            })
+            .collect();
+        assert!(matches!(
+            check_polygon(&pentagram, POLYGON_PLANARITY),
+            Err(PolygonProblem::NotConvex { .. })
+        ));
+        let arrow = [
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.5, 0.0),
+            DVec3::new(1.0, 2.0, 0.0),
+        ];
+        assert!(matches!(
+            check_polygon(&arrow, POLYGON_PLANARITY),
+            Err(PolygonProblem::NotConvex { vertex: 2 })
+        ));
+        let mut warped = square();
+        warped[2].z = 0.5;
+        assert!(matches!(
+            check_polygon(&warped, POLYGON_PLANARITY),
+            Err(PolygonProblem::NotPlanar { .. })
+        ));
+        let mut repeated = square();
+        repeated[3] = repeated[2];
+        assert_eq!(
+            check_polygon(&repeated, POLYGON_PLANARITY),
+            Err(PolygonProblem::ZeroArea {
+                vertices: [0, 2, 3]
+            })
+        );
+        let line = [DVec3::ZERO, DVec3::X, DVec3::new(2.0, 0.0, 0.0)];
+        assert!(matches!(
+            check_polygon(&line, POLYGON_PLANARITY),
+            Err(PolygonProblem::ZeroArea { .. })
+        ));
+        assert_eq!(
+            check_polygon(&square()[..2], POLYGON_PLANARITY),
+            Err(PolygonProblem::TooFew(2))
+        );
+        let far = [DVec3::ZERO, DVec3::X, DVec3::new(0.0, 1e39, 0.0)];
+        assert_eq!(
+            check_polygon(&far, POLYGON_PLANARITY),
+            Err(PolygonProblem::OutOfRange { vertex: 2 })
+        );
+    }
+
+    fn materials(name: &str) -> Result<u32, String> {
+        match name {
+            "red" => Ok(0),
+            "white" => Ok(1),
+            _ => Err(format!("unknown material \"{name}\"")),
+        }
+    }
+
+    #[test]
+    fn obj_reads_polygons_relative_indices_and_usemtl() {
+        let text = "\
+# a quad, a pentagon and a triangle
+mtllib scene.mtl
+o thing
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+vt 0 0
+vn 0 0 1
+f 1/1/1 2/1/1 3/1/1 4/1/1
+usemtl red
+v 0 0 1
+v 1 0 1
+v 1.5 0.5 1
+v 1 1 1
+v 0 1 1
+f -5 -4 -3 -2 -1   # the pentagon
+s off
+usemtl white
+f 1//1 -1//1 5//1
+";
+        let obj = parse_obj(text, materials).unwrap();
+        assert_eq!(obj.positions.len(), 9);
+        assert_eq!(obj.faces.len(), 3);
+        let lines: Vec<_> = obj.faces.iter().map(|f| f.line).collect();
+        assert_eq!(lines, [10, 17, 20]);
+        let mats: Vec<_> = obj.faces.iter().map(|f| f.material).collect();
+        assert_eq!(mats, [None, Some(0), Some(1)]);
+        assert_eq!(obj.face_indices(&obj.faces[1]), &[4, 5, 6, 7, 8]);
+        assert_eq!(obj.face_indices(&obj.faces[2]), &[0, 8, 4]);
+    }
+
+    #[test]
+    fn obj_allows_forward_references() {
+        let obj = parse_obj("f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n", materials).unwrap();
+        assert_eq!(obj.face_indices(&obj.faces[0]), &[0, 1, 2]);
+    }
+
+    #[test]
+    fn obj_errors_name_their_line() {
+        let cases = [
+            ("v 0 0 0\nv 1 0\n", 2, "expected 3 numbers"),
+            ("v 0 0 0\nv a 0 0\n", 2, "expected a number"),
+            ("\n\nv nan 0 0\n", 3, "finite"),
+            ("v 0 0 1e39\n", 1, "finite"),
+            ("v 0 0 0\nv 1 0 0\nf 1 2\n", 3, "at least 3 vertices"),
+            ("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 0 1 2\n", 4, "index 0"),
+            ("v 0 0 0\nf 1 2 3\nv 1 0 0\n", 2, "vertex 3 does not exist"),
+            (
+                "v 0 0 0\nv 1 0 0\nf -1 -2 -3\n",
+                3,
+                "before the first vertex",
+            ),
+            ("v 0 0 0\nf 1 x 1\n", 2, "expected a vertex index"),
+            ("f 1 2 99999999999999999999\n", 1, "expected a vertex index"),
+            ("usemtl\n", 1, "material name"),
+            ("# c\nusemtl gold\n", 2, "unknown material \"gold\""),
+        ];
+        for (text, line, message) in cases {
+            let e = parse_obj(text, materials).unwrap_err();
+            assert_eq!(e.line, line, "{text:?}: {e:?}");
+            assert!(e.message.contains(message), "{text:?}: {e:?}");
+        }
+    }
+
+    /// One OBJ line, valid or not.
+    fn obj_line() -> impl Strategy<Value = String> {
+        let number = prop_oneof![
+            (-10.0f64..10.0).prop_map(|x| x.to_string()),
+            Just("nan".to_string()),
+            Just("-inf".to_string()),
+            Just("1e400".to_string()),
+            Just("x".to_string()),
+        ];
+        let index = prop_oneof![
+            (-12i64..12).prop_map(|i| i.to_string()),
+            (-12i64..12).prop_map(|i| format!("{i}/1/-1")),
+            (-12i64..12).prop_map(|i| format!("{i}//2")),
+            Just("9223372036854775807".to_string()),
+            Just("-9223372036854775808".to_string()),
+            Just("/".to_string()),
+        ];
+        prop_oneof![
+            4 => prop::collection::vec(number, 0..5).prop_map(|n| format!("v {}", n.join(" "))),
+            4 => prop::collection::vec(index, 0..7).prop_map(|i| format!("f {}", i.join(" "))),
+            1 => prop_oneof![Just("red"), Just("white"), Just("gold"), Just("")]
+                .prop_map(|m| format!("usemtl {m}")),
+            1 => "[ -~]{0,20}",
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(3000))]
+
+        #[test]
+        fn obj_parsing_never_panics(lines in prop::collection::vec(obj_line(), 0..30)) {
+            if let Ok(obj) = parse_obj(&lines.join("\n"), materials) {
+                for face in &obj.faces {
+                    let polygon: Vec<DVec3> =
+                        obj.face_indices(face).iter().map(|&i| obj.positions[i]).collect();
+                    if check_polygon(&polygon, POLYGON_PLANARITY).is_ok() {
+                        prop_assert!(area(&fan(&polygon).collect::<Vec<_>>()) > 0.0);
+                    }
+                }
+            }
+        }
+
+        #[test]
+        fn polygon_check_never_panics(
+            points in prop::collection::vec(prop::array::uniform3(
+                prop_oneof![-1e3f64..1e3, Just(0.0), Just(f64::NAN), Just(1e38), Just(-3.4e38)]
+            ), 0..8)
+        ) {
+            let polygon: Vec<DVec3> = points.into_iter().map(DVec3::from_array).collect();
+            let _ = check_polygon(&polygon, LIGHT_PLANARITY);
+        }
     }
 }
