@@ -361,6 +361,8 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
         Some(tr) => transform(&tr.table()?)?,
         None => Transform::IDENTITY,
     };
+    // Every kind but mesh has its `material` (required above): `unwrap_or(0)` below never
+    // falls back.
     let with = |m: u32| {
         move |vertices: [DVec3; 3]| Triangle {
             vertices,
