@@ -1,12 +1,802 @@
 //! TOML (+ OBJ) -> `Scene`, with every check of SCENE_FORMAT.md.
 //!
-//! To be implemented: see `load`.
+//! The TOML is walked by hand rather than through serde: every accessor carries the key
+//! path that led to it (`shapes[3].vertices[1]`), so each refusal names its key and says
+//! what was expected, and unknown keys are refused with the list of allowed ones.
 
-use super::Scene;
+use super::brdf::max_directional_albedo;
+use super::shapes::{self, LIGHT_PLANARITY, MAX_SIERPINSKI_LEVEL, POLYGON_PLANARITY, Transform};
+use super::{Camera, Light, Material, MaterialKind, Rgb, Scene, Settings, Surface, Triangle};
 use crate::{Error, Result};
-use std::path::Path;
+use glam::DVec3;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use toml::{Table, Value};
+
+/// The largest image or item-buffer edge, in pixels.
+pub const MAX_RESOLUTION: i64 = 16384;
+/// The largest `subdivisions` of an area light (2 n^2 patches, (n+1)^2 light samples).
+pub const MAX_SUBDIVISIONS: i64 = 64;
+
+const TOP_KEYS: &[&str] = &[
+    "format",
+    "camera",
+    "environment",
+    "settings",
+    "materials",
+    "shapes",
+    "lights",
+];
+const CAMERA_KEYS: &[&str] = &["position", "look_at", "up", "fov_y", "width", "height"];
+const ENVIRONMENT_KEYS: &[&str] = &["radiance"];
+const SETTINGS_KEYS: &[&str] = &[
+    "patch_size",
+    "hemicube_resolution",
+    "bundle_resolution",
+    "iterations",
+    "seed",
+];
+const TRANSFORM_KEYS: &[&str] = &["scale", "rotate", "translate"];
+const SHAPE_TYPES: &str = "\"quad\", \"triangle\", \"mesh\", \"box\" or \"sierpinski\"";
 
 /// Loads and validates a scene file. Errors name the file, the key and what was expected.
 pub fn load(path: &Path) -> Result<Scene> {
-    Err(Error::scene(path, "format", "scene loading is not written yet"))
+    let bytes = std::fs::read(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let line = 1 + e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count();
+        Error::scene(path, format!("line {line}"), "not UTF-8 text")
+    })?;
+    load_str(&text, path)
+}
+
+/// Loads a scene from its text. `source` names the file in errors and in `Scene::source`,
+/// and mesh paths are relative to its folder.
+pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
+    let root = parse_toml(text, source)?;
+    let cx = Context { file: source };
+    let root = Tbl {
+        cx: &cx,
+        key: String::new(),
+        table: &root,
+    };
+
+    // `format` first: a scene of another format should hear that, not about unknown keys.
+    let format = root
+        .req("format", "format = 1")?
+        .integer(i64::MIN, i64::MAX)?;
+    if format != 1 {
+        return Err(cx.err(
+            "format",
+            format!("unsupported format {format}: this build reads format 1"),
+        ));
+    }
+    root.only(TOP_KEYS)?;
+
+    let camera = camera(&root.req("camera", "a [camera] table")?.table()?)?;
+    let environment = match root.get("environment") {
+        Some(e) => {
+            let e = e.table()?;
+            e.only(ENVIRONMENT_KEYS)?;
+            e.get("radiance").map_or(Ok([0.0; 3]), |r| r.rgb())?
+        }
+        None => [0.0; 3],
+    };
+    let settings = match root.get("settings") {
+        Some(s) => settings(&s.table()?)?,
+        None => Settings::default(),
+    };
+    let materials = match root.get("materials") {
+        Some(m) => materials(&m.table()?)?,
+        None => Vec::new(),
+    };
+    let surfaces = match root.get("shapes") {
+        Some(s) => {
+            let names: HashMap<&str, u32> = materials
+                .iter()
+                .zip(0..)
+                .map(|(m, i)| (m.name.as_str(), i))
+                .collect();
+            let known = Materials {
+                by_name: &names,
+                list: &materials,
+            };
+            s.tables("[[shapes]] tables")?
+                .iter()
+                .map(|t| shape(t, &known))
+                .collect::<Result<Vec<_>>>()?
+        }
+        None => Vec::new(),
+    };
+    let lights = match root.get("lights") {
+        Some(l) => l
+            .tables("[[lights]] tables")?
+            .iter()
+            .map(light)
+            .collect::<Result<Vec<_>>>()?,
+        None => Vec::new(),
+    };
+
+    if surfaces.iter().all(|s| s.triangles.is_empty()) {
+        return Err(cx.err(
+            "shapes",
+            "the scene has no surfaces: add at least one [[shapes]] entry",
+        ));
+    }
+    let glows = |c: &Rgb| c.iter().any(|&x| x > 0.0);
+    let emits = lights.iter().any(|l| match l {
+        Light::Point { power, .. } => glows(power),
+        Light::Area { radiance, .. } => glows(radiance),
+    }) || surfaces.iter().any(|s| glows(&s.emission))
+        || glows(&environment);
+    if !emits {
+        return Err(cx.err(
+            "lights",
+            "the scene has no emitter: add a [[lights]] entry with non-zero power or \
+             radiance, an `emission` on a shape, or a non-black [environment] radiance",
+        ));
+    }
+
+    Ok(Scene {
+        source: source.to_path_buf(),
+        camera,
+        environment,
+        settings,
+        materials,
+        surfaces,
+        lights,
+    })
+}
+
+/// Parses the TOML text, keeping the toml crate's line and column in the key.
+fn parse_toml(text: &str, source: &Path) -> Result<Table> {
+    text.parse::<Table>().map_err(|e| {
+        let shown = e.to_string();
+        let message = e.message().trim();
+        // The toml crate's text is "TOML parse error at line L, column C", a snippet with a
+        // caret, then the message; the snippet is kept, the message moved to the front.
+        match shown.split_once('\n') {
+            Some((head, rest)) if head.starts_with("TOML parse error at ") => {
+                let snippet = rest.trim_end();
+                let snippet = snippet.strip_suffix(message).unwrap_or(snippet).trim_end();
+                Error::scene(
+                    source,
+                    head.trim_start_matches("TOML parse error at "),
+                    format!("TOML syntax error: {message}\n{snippet}"),
+                )
+            }
+            _ => Error::scene(source, "syntax", shown.trim_end()),
+        }
+    })
+}
+
+fn camera(t: &Tbl) -> Result<Camera> {
+    t.only(CAMERA_KEYS)?;
+    let position = t.req("position", "3 numbers")?.vec3()?;
+    let look_at = t.req("look_at", "3 numbers")?.vec3()?;
+    let up_item = t.req("up", "3 numbers")?;
+    let up = up_item.vec3()?;
+    let fov_item = t.req("fov_y", "a number in (0, 180)")?;
+    let fov_y = fov_item.number()?;
+    let width = t.req("width", "an integer")?.integer(1, MAX_RESOLUTION)? as u32;
+    let height = t.req("height", "an integer")?.integer(1, MAX_RESOLUTION)? as u32;
+
+    if !(fov_y > 0.0 && fov_y < 180.0) {
+        return Err(fov_item.err(format!("must be > 0 and < 180 (degrees), got {fov_y}")));
+    }
+    let Some(forward) = (look_at - position).try_normalize() else {
+        return Err(t.cx.err(
+            t.child("look_at"),
+            format!(
+                "must differ from camera.position, both are {}",
+                show(position)
+            ),
+        ));
+    };
+    let Some(up_dir) = up.try_normalize() else {
+        return Err(up_item.err("must not be zero"));
+    };
+    // Below this sine the image's right = forward x up has no reliable direction.
+    if forward.cross(up_dir).length() < 1e-6 {
+        return Err(up_item.err(format!(
+            "must not be parallel to the view direction (look_at - position = {})",
+            show(look_at - position)
+        )));
+    }
+    Ok(Camera {
+        position,
+        look_at,
+        up,
+        fov_y,
+        width,
+        height,
+    })
+}
+
+fn settings(t: &Tbl) -> Result<Settings> {
+    t.only(SETTINGS_KEYS)?;
+    let mut s = Settings::default();
+    if let Some(p) = t.get("patch_size") {
+        s.patch_size = p.positive()?;
+    }
+    if let Some(r) = t.get("hemicube_resolution") {
+        s.hemicube_resolution = r.integer(1, MAX_RESOLUTION)? as u32;
+    }
+    if let Some(r) = t.get("bundle_resolution") {
+        s.bundle_resolution = r.integer(1, MAX_RESOLUTION)? as u32;
+    }
+    if let Some(i) = t.get("iterations") {
+        // 0 is meaningful: first shot only.
+        s.iterations = i.integer(0, u32::MAX.into())? as u32;
+    }
+    if let Some(seed) = t.get("seed") {
+        s.seed = seed.integer(0, i64::MAX)? as u64;
+    }
+    Ok(s)
+}
+
+fn materials(t: &Tbl) -> Result<Vec<Material>> {
+    let mut out = Vec::with_capacity(t.table.len());
+    for name in t.table.keys() {
+        let m = t.req(name, "a table")?.table()?;
+        let kind_item = m.req("type", "\"diffuse\" or \"phong\"")?;
+        let kind = match kind_item.string()? {
+            "diffuse" => {
+                m.only(&["type", "albedo"])?;
+                let albedo_item = m.req("albedo", "3 numbers in [0, 1]")?;
+                let albedo = albedo_item.rgb()?;
+                if albedo.iter().any(|&a| a > 1.0) {
+                    return Err(albedo_item.err(format!(
+                        "must be <= 1 in every channel (a diffuse albedo above 1 creates energy), got {}",
+                        show_rgb(albedo)
+                    )));
+                }
+                MaterialKind::Diffuse { albedo }
+            }
+            "phong" => {
+                m.only(&["type", "diffuse", "specular", "shininess"])?;
+                let diffuse = m.req("diffuse", "3 numbers >= 0")?.rgb()?;
+                let specular = m.req("specular", "3 numbers >= 0")?.rgb()?;
+                let shininess_item = m.req("shininess", "a number >= 0")?;
+                let shininess = shininess_item.number()?;
+                if shininess < 0.0 {
+                    return Err(shininess_item.err(format!("must be >= 0, got {shininess}")));
+                }
+                MaterialKind::Phong {
+                    diffuse,
+                    specular,
+                    shininess: shininess as f32,
+                }
+            }
+            other => {
+                return Err(kind_item.err(format!(
+                    "unknown material type \"{other}\": expected \"diffuse\" or \"phong\""
+                )));
+            }
+        };
+        let albedo = max_directional_albedo(&kind);
+        if albedo.iter().any(|&a| a.is_nan() || a > 1.0) {
+            let largest = albedo.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            return Err(t.cx.err(
+                &m.key,
+                format!(
+                    "gains energy: its largest directional albedo is {largest} (per channel {}), \
+                     it must be <= 1 in every channel at every incident angle",
+                    show_rgb(albedo)
+                ),
+            ));
+        }
+        out.push(Material {
+            name: name.clone(),
+            kind,
+        });
+    }
+    Ok(out)
+}
+
+/// The materials a shape may name.
+struct Materials<'a> {
+    by_name: &'a HashMap<&'a str, u32>,
+    list: &'a [Material],
+}
+
+impl Materials<'_> {
+    fn find(&self, name: &str) -> Result<u32, String> {
+        self.by_name.get(name).copied().ok_or_else(|| {
+            if self.list.is_empty() {
+                format!("unknown material \"{name}\": the scene defines no [materials]")
+            } else {
+                let names: Vec<&str> = self.list.iter().map(|m| m.name.as_str()).collect();
+                format!(
+                    "unknown material \"{name}\": [materials] defines {}",
+                    names.join(", ")
+                )
+            }
+        })
+    }
+}
+
+fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
+    let type_item = t.req("type", SHAPE_TYPES)?;
+    let kind = type_item.string()?;
+    let specific: &[&str] = match kind {
+        "quad" | "triangle" => &["vertices"],
+        "mesh" => &["file", "transform"],
+        "box" => &["min", "max", "transform"],
+        "sierpinski" => &["center", "size", "level", "transform"],
+        other => {
+            return Err(type_item.err(format!(
+                "unknown shape type \"{other}\": expected {SHAPE_TYPES}"
+            )));
+        }
+    };
+    let mut allowed = vec!["type", "material", "emission", "two_sided"];
+    allowed.extend_from_slice(specific);
+    if t.table.contains_key("transform") && !allowed.contains(&"transform") {
+        return Err(t.cx.err(
+            t.child("transform"),
+            format!("a {kind} takes no transform (only mesh, box and sierpinski do)"),
+        ));
+    }
+    t.only(&allowed)?;
+
+    let material = match t.get("material") {
+        Some(m) => {
+            let name = m.string()?;
+            Some(materials.find(name).map_err(|msg| m.err(msg))?)
+        }
+        None if kind == "mesh" => None,
+        None => {
+            return Err(t
+                .cx
+                .err(t.child("material"), "required: a [materials] name"));
+        }
+    };
+    let emission = t.get("emission").map_or(Ok([0.0; 3]), |e| e.rgb())?;
+    let two_sided = t.get("two_sided").map_or(Ok(false), |b| b.boolean())?;
+    let transform = match t.get("transform") {
+        Some(tr) => transform(&tr.table()?)?,
+        None => Transform::IDENTITY,
+    };
+    // Every kind but mesh has its `material` (required above): `unwrap_or(0)` below never
+    // falls back.
+    let with = |m: u32| {
+        move |vertices: [DVec3; 3]| Triangle {
+            vertices,
+            material: m,
+        }
+    };
+
+    let (origin, triangles) = match kind {
+        "quad" | "triangle" => {
+            let n = if kind == "quad" { 4 } else { 3 };
+            let vertices_item = t.req("vertices", &format!("{n} points"))?;
+            let vertices = vertices_item.points(n)?;
+            shapes::check_polygon(&vertices, POLYGON_PLANARITY)
+                .map_err(|p| vertices_item.err(format!("this {kind} is {p}")))?;
+            let m = material.unwrap_or(0);
+            let triangles = shapes::fan(&vertices).map(with(m)).collect();
+            (format!("{} ({kind})", t.key), triangles)
+        }
+        "box" => {
+            let min = t.req("min", "3 numbers")?.vec3()?;
+            let max_item = t.req("max", "3 numbers")?;
+            let max = max_item.vec3()?;
+            if !(max.cmpgt(min).all()) {
+                return Err(max_item.err(format!(
+                    "must be greater than min on every axis (a flat box has zero-area faces), \
+                     got min {} and max {}",
+                    show(min),
+                    show(max)
+                )));
+            }
+            let m = material.unwrap_or(0);
+            let triangles = shapes::box_triangles(min, max)
+                .into_iter()
+                .map(|tri| transform.apply_triangle(tri))
+                .map(with(m))
+                .collect();
+            (format!("{} (box)", t.key), triangles)
+        }
+        "sierpinski" => {
+            let center = t.req("center", "3 numbers")?.vec3()?;
+            let size = t.req("size", "a number > 0")?.positive()?;
+            let level = t
+                .req("level", "an integer from 0 to 8")?
+                .integer(0, MAX_SIERPINSKI_LEVEL.into())? as u32;
+            let m = material.unwrap_or(0);
+            let triangles = shapes::sierpinski(center, size, level)
+                .into_iter()
+                .map(|tri| transform.apply_triangle(tri))
+                .map(with(m))
+                .collect();
+            (format!("{} (sierpinski level {level})", t.key), triangles)
+        }
+        _ => {
+            let file_item = t.req("file", "the path of an OBJ file")?;
+            let written = file_item.string()?;
+            let triangles = mesh(t, &file_item, written, material, &transform, materials)?;
+            (format!("{} (mesh \"{written}\")", t.key), triangles)
+        }
+    };
+
+    // Quads and triangles were checked as written; the rest after their transform, which a
+    // tiny or huge scale can make degenerate or overflow.
+    if matches!(kind, "box" | "sierpinski") {
+        for tri in &triangles {
+            shapes::check_polygon(&tri.vertices, POLYGON_PLANARITY).map_err(|p| {
+                t.cx.err(
+                    &t.key,
+                    format!("after its transform, a triangle of this {kind} is {p}"),
+                )
+            })?;
+        }
+    }
+
+    Ok(Surface {
+        origin,
+        triangles,
+        emission,
+        two_sided,
+    })
+}
+
+/// Reads, parses and triangulates an OBJ mesh. Errors inside the file name the mesh file and
+/// `<path as written> line N`.
+fn mesh(
+    t: &Tbl,
+    file_item: &Item,
+    written: &str,
+    material: Option<u32>,
+    transform: &Transform,
+    materials: &Materials,
+) -> Result<Vec<Triangle>> {
+    let path =
+        t.cx.file
+            .parent()
+            .map_or_else(|| PathBuf::from(written), |dir| dir.join(written));
+    let bytes = std::fs::read(&path).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            file_item.err(format!("mesh file {} does not exist", path.display()))
+        } else {
+            file_item.err(format!("mesh file {} cannot be read: {e}", path.display()))
+        }
+    })?;
+    // Lossy: stray bytes in comments or names must not hide the line of a real problem.
+    let text = String::from_utf8_lossy(&bytes);
+    let at_line = |line: usize, message: String| {
+        Error::scene(
+            &path,
+            format!("{written} line {line}"),
+            format!("{message} (mesh of {})", t.key),
+        )
+    };
+    let obj = shapes::parse_obj(&text, |name| materials.find(name))
+        .map_err(|e| at_line(e.line, e.message))?;
+    if obj.faces.is_empty() {
+        return Err(file_item.err(format!("mesh file {} has no faces", path.display())));
+    }
+
+    let positions: Vec<DVec3> = obj.positions.iter().map(|&p| transform.apply(p)).collect();
+    let mut triangles = Vec::with_capacity(obj.indices.len());
+    let mut polygon = Vec::new();
+    for face in &obj.faces {
+        let Some(m) = face.material.or(material) else {
+            return Err(at_line(
+                face.line,
+                format!(
+                    "this face has no `usemtl` above it and {} sets no `material`",
+                    t.key
+                ),
+            ));
+        };
+        polygon.clear();
+        polygon.extend(obj.face_indices(face).iter().map(|&i| positions[i]));
+        shapes::check_polygon(&polygon, POLYGON_PLANARITY)
+            .map_err(|p| at_line(face.line, format!("this face is {p}")))?;
+        triangles.extend(shapes::fan(&polygon).map(|vertices| Triangle {
+            vertices,
+            material: m,
+        }));
+    }
+    Ok(triangles)
+}
+
+fn transform(t: &Tbl) -> Result<Transform> {
+    t.only(TRANSFORM_KEYS)?;
+    let mut out = Transform::IDENTITY;
+    if let Some(s) = t.get("scale") {
+        out.scale = match s.value {
+            Value::Array(_) => {
+                let [x, y, z] = s.fixed::<3>("3 numbers > 0 [x, y, z], or one number")?;
+                DVec3::new(x.positive()?, y.positive()?, z.positive()?)
+            }
+            _ => DVec3::splat(s.positive()?),
+        };
+    }
+    if let Some(r) = t.get("rotate") {
+        let [x, y, z, degrees] = r.fixed::<4>("4 numbers [axis_x, axis_y, axis_z, degrees]")?;
+        let axis = DVec3::new(x.number()?, y.number()?, z.number()?);
+        out.rotation = Transform::rotation(axis, degrees.number()?)
+            .ok_or_else(|| r.err("the rotation axis (the first 3 numbers) must not be zero"))?;
+    }
+    if let Some(tr) = t.get("translate") {
+        out.translation = tr.vec3()?;
+    }
+    Ok(out)
+}
+
+fn light(t: &Tbl) -> Result<Light> {
+    let type_item = t.req("type", "\"point\" or \"area\"")?;
+    match type_item.string()? {
+        "point" => {
+            t.only(&["type", "position", "power"])?;
+            Ok(Light::Point {
+                position: t.req("position", "3 numbers")?.vec3()?,
+                power: t.req("power", "3 numbers >= 0")?.rgb()?,
+            })
+        }
+        "area" => {
+            t.only(&["type", "vertices", "radiance", "subdivisions"])?;
+            let vertices_item = t.req("vertices", "4 points")?;
+            let points = vertices_item.points(4)?;
+            shapes::check_polygon(&points, LIGHT_PLANARITY)
+                .map_err(|p| vertices_item.err(format!("this area light is {p}")))?;
+            let vertices = [points[0], points[1], points[2], points[3]];
+            let radiance = t.req("radiance", "3 numbers >= 0")?.rgb()?;
+            let subdivisions = match t.get("subdivisions") {
+                Some(s) => s.integer(1, MAX_SUBDIVISIONS)? as u32,
+                None => 1,
+            };
+            Ok(Light::Area {
+                vertices,
+                radiance,
+                subdivisions,
+            })
+        }
+        other => Err(type_item.err(format!(
+            "unknown light type \"{other}\": expected \"point\" or \"area\""
+        ))),
+    }
+}
+
+/// The file being read, for errors.
+struct Context<'a> {
+    file: &'a Path,
+}
+
+impl Context<'_> {
+    fn err(&self, key: impl Into<String>, message: impl Into<String>) -> Error {
+        Error::scene(self.file, key, message)
+    }
+}
+
+/// A TOML table and the key path that leads to it ("" for the root).
+struct Tbl<'a> {
+    cx: &'a Context<'a>,
+    key: String,
+    table: &'a Table,
+}
+
+/// A TOML value and the key path that leads to it.
+struct Item<'a> {
+    cx: &'a Context<'a>,
+    key: String,
+    value: &'a Value,
+}
+
+impl<'a> Tbl<'a> {
+    fn child(&self, name: &str) -> String {
+        let name = quote_key(name);
+        if self.key.is_empty() {
+            name
+        } else {
+            format!("{}.{name}", self.key)
+        }
+    }
+
+    fn get(&self, name: &str) -> Option<Item<'a>> {
+        self.table.get(name).map(|value| Item {
+            cx: self.cx,
+            key: self.child(name),
+            value,
+        })
+    }
+
+    fn req(&self, name: &str, expected: &str) -> Result<Item<'a>> {
+        self.get(name).ok_or_else(|| {
+            self.cx
+                .err(self.child(name), format!("required: {expected}"))
+        })
+    }
+
+    /// Refuses any key not in `allowed`, naming the allowed ones.
+    fn only(&self, allowed: &[&str]) -> Result<()> {
+        match self.table.keys().find(|k| !allowed.contains(&k.as_str())) {
+            Some(unknown) => Err(self.cx.err(
+                self.child(unknown),
+                format!("unknown key; allowed here: {}", allowed.join(", ")),
+            )),
+            None => Ok(()),
+        }
+    }
+}
+
+impl<'a> Item<'a> {
+    fn err(&self, message: impl Into<String>) -> Error {
+        self.cx.err(&self.key, message)
+    }
+
+    fn expected(&self, what: &str) -> Error {
+        self.err(format!("expected {what}, got {}", describe(self.value)))
+    }
+
+    fn index(&self, i: usize, value: &'a Value) -> Item<'a> {
+        Item {
+            cx: self.cx,
+            key: format!("{}[{i}]", self.key),
+            value,
+        }
+    }
+
+    fn table(&self) -> Result<Tbl<'a>> {
+        match self.value {
+            Value::Table(table) => Ok(Tbl {
+                cx: self.cx,
+                key: self.key.clone(),
+                table,
+            }),
+            _ => Err(self.expected("a table")),
+        }
+    }
+
+    /// An array of tables (`[[shapes]]`), each keyed `key[i]`.
+    fn tables(&self, what: &str) -> Result<Vec<Tbl<'a>>> {
+        let Value::Array(items) = self.value else {
+            return Err(self.expected(&format!("an array of {what}")));
+        };
+        items
+            .iter()
+            .enumerate()
+            .map(|(i, v)| self.index(i, v).table())
+            .collect()
+    }
+
+    /// An array of exactly N values.
+    fn fixed<const N: usize>(&self, what: &str) -> Result<[Item<'a>; N]> {
+        let wrong = || self.expected(what);
+        let Value::Array(items) = self.value else {
+            return Err(wrong());
+        };
+        if items.len() != N {
+            return Err(self.err(format!("expected {what}, got {} values", items.len())));
+        }
+        let items: Vec<Item<'a>> = items
+            .iter()
+            .enumerate()
+            .map(|(i, v)| self.index(i, v))
+            .collect();
+        items.try_into().map_err(|_| wrong())
+    }
+
+    fn string(&self) -> Result<&'a str> {
+        self.value.as_str().ok_or_else(|| self.expected("a string"))
+    }
+
+    fn boolean(&self) -> Result<bool> {
+        self.value
+            .as_bool()
+            .ok_or_else(|| self.expected("true or false"))
+    }
+
+    fn integer(&self, min: i64, max: i64) -> Result<i64> {
+        let Value::Integer(i) = *self.value else {
+            return Err(self.expected("an integer"));
+        };
+        if i < min || i > max {
+            return Err(self.err(format!("must be from {min} to {max}, got {i}")));
+        }
+        Ok(i)
+    }
+
+    /// A finite number within the f32 range (integers are numbers too).
+    fn number(&self) -> Result<f64> {
+        let x = match *self.value {
+            Value::Integer(i) => i as f64,
+            Value::Float(x) => x,
+            _ => return Err(self.expected("a number")),
+        };
+        if !x.is_finite() {
+            return Err(self.err(format!("must be a finite number, got {x}")));
+        }
+        if x.abs() > shapes::MAX_COORDINATE {
+            return Err(self.err(format!(
+                "out of range: {x:e} is beyond ±{:e}, the f32 range the GPU works in",
+                shapes::MAX_COORDINATE
+            )));
+        }
+        Ok(x)
+    }
+
+    fn positive(&self) -> Result<f64> {
+        let x = self.number()?;
+        if x > 0.0 {
+            Ok(x)
+        } else {
+            Err(self.err(format!("must be > 0, got {x}")))
+        }
+    }
+
+    fn vec3(&self) -> Result<DVec3> {
+        let [x, y, z] = self.fixed::<3>("3 numbers [x, y, z]")?;
+        Ok(DVec3::new(x.number()?, y.number()?, z.number()?))
+    }
+
+    /// A colour: 3 numbers, each >= 0.
+    fn rgb(&self) -> Result<Rgb> {
+        let [r, g, b] = self.fixed::<3>("3 numbers [r, g, b]")?;
+        let rgb = [r.number()?, g.number()?, b.number()?];
+        if let Some(c) = rgb.iter().position(|&x| x < 0.0) {
+            return Err(self.err(format!(
+                "a colour must be >= 0 in every channel, got {} in channel {}",
+                rgb[c],
+                ["red", "green", "blue"][c]
+            )));
+        }
+        Ok(rgb.map(|x| x as f32))
+    }
+
+    /// An array of exactly `n` points, each keyed `key[i]`.
+    fn points(&self, n: usize) -> Result<Vec<DVec3>> {
+        let what = format!("{n} points [[x, y, z], ...]");
+        let Value::Array(items) = self.value else {
+            return Err(self.expected(&what));
+        };
+        if items.len() != n {
+            return Err(self.err(format!("expected {what}, got {} values", items.len())));
+        }
+        items
+            .iter()
+            .enumerate()
+            .map(|(i, v)| self.index(i, v).vec3())
+            .collect()
+    }
+}
+
+/// A key as TOML would need it written: bare if it can be, quoted otherwise.
+fn quote_key(name: &str) -> String {
+    let bare = !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    if bare {
+        name.to_string()
+    } else {
+        format!("{name:?}")
+    }
+}
+
+/// What a value is, for "expected X, got Y".
+fn describe(value: &Value) -> String {
+    match value {
+        Value::String(s) if s.len() <= 40 => format!("the string {s:?}"),
+        Value::String(_) => "a string".into(),
+        Value::Integer(i) => format!("the integer {i}"),
+        Value::Float(x) => format!("the number {x}"),
+        Value::Boolean(b) => format!("{b}"),
+        Value::Datetime(d) => format!("the date-time {d}"),
+        Value::Array(a) => format!("an array of {} values", a.len()),
+        Value::Table(_) => "a table".into(),
+    }
+}
+
+fn show(v: DVec3) -> String {
+    format!("[{}, {}, {}]", v.x, v.y, v.z)
+}
+
+fn show_rgb(c: Rgb) -> String {
+    format!("[{}, {}, {}]", c[0], c[1], c[2])
 }
