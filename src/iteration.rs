@@ -3,7 +3,7 @@
 //! `StepRng(seed, k)`, so the state between steps is only J_j, win_j and the image sum.
 
 use crate::gpu::scene_buffers::SceneBuffers;
-use crate::gpu::{buffers, Context};
+use crate::gpu::{Context, buffers};
 use crate::layout::GpuBundle;
 use crate::rng::StepRng;
 use crate::scene::Patches;
@@ -113,7 +113,11 @@ impl Iteration {
         let sums = buffers::storage_zeroed(device, "firstshot.iteration.sums", 24 * n, none);
         Ok(Iteration {
             reflect: BundleReflect::new(device, scene, &bundle, &outgoing, &max_bits),
-            visibility: BundleVisibility::new(device, [&bundle, &counts, &offsets, &cursor, &fragments, &overflow], resolution),
+            visibility: BundleVisibility::new(
+                device,
+                [&bundle, &counts, &offsets, &cursor, &fragments, &overflow],
+                resolution,
+            ),
             scan: PrefixSum::new(device, lines + 1, &counts, &offsets),
             transfer: BundleTransfer::new(
                 device,

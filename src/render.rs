@@ -224,8 +224,9 @@ fn direct_image(
         ];
         let cam = gpu_camera(&scene.camera, options.width, options.height, near, [jitter[0] as f32, jitter[1] as f32]);
         ctx.queue.write_buffer(&camera.camera, 0, bytemuck::bytes_of(&cam));
-        let mut encoder =
-            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.direct_image") });
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.direct_image") });
         camera.record(&mut encoder, &buffers.vertices, buffers.patch_count);
         estimate.record(&mut encoder);
         ctx.queue.submit([encoder.finish()]);
@@ -297,7 +298,8 @@ fn iterate(
         }
         let batch_start = Instant::now();
         let batch = STEPS_PER_BATCH.min(options.iterations - step);
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.snapshot") });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.snapshot") });
         copy(&mut encoder, &buffers.state, &state_backup);
         copy(&mut encoder, &estimate.image_sum, &image_backup);
         iteration.clear_overflow(&mut encoder);
@@ -313,7 +315,8 @@ fn iterate(
             let jitter = [rng.uniform() as f32, rng.uniform() as f32];
             let cam = gpu_camera(&scene.camera, options.width, options.height, near, jitter);
             ctx.queue.write_buffer(&camera.camera, 0, bytemuck::bytes_of(&cam));
-            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.step") });
+            let mut encoder =
+                device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.step") });
             iteration.record_step(&mut encoder, buffers);
             camera.record(&mut encoder, &buffers.vertices, buffers.patch_count);
             estimate.record(&mut encoder);
@@ -322,7 +325,8 @@ fn iterate(
         if iteration.overflowed(ctx)? {
             // A line held more surfaces than the list had room for: restore the batch's
             // start and redo it with twice the room.
-            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.restore") });
+            let mut encoder = device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.restore") });
             copy(&mut encoder, &state_backup, &buffers.state);
             copy(&mut encoder, &image_backup, &estimate.image_sum);
             ctx.queue.submit([encoder.finish()]);

@@ -3,7 +3,7 @@
 mod common;
 
 use common::*;
-use firstshot::render::{render, RenderOptions};
+use firstshot::render::{RenderOptions, render};
 use firstshot::scene::{Material, MaterialKind, Patches};
 use glam::DVec3;
 

@@ -40,9 +40,7 @@ power = [10, 10, 10]
 
 /// A folder of its own for each test, so that tests running in parallel never share files.
 fn scratch(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir()
-        .join(format!("firstshot-scene-load-{}", std::process::id()))
-        .join(test);
+    let dir = std::env::temp_dir().join(format!("firstshot-scene-load-{}", std::process::id())).join(test);
     std::fs::create_dir_all(dir.join("meshes")).expect("temp folder");
     dir
 }
@@ -72,9 +70,7 @@ fn refused(text: &str, key: &str) -> String {
 
 fn refused_at(result: firstshot::Result<Scene>, key: &str) -> String {
     match result {
-        Err(Error::Scene {
-            key: k, message, ..
-        }) => {
+        Err(Error::Scene { key: k, message, .. }) => {
             assert_eq!(k, key, "refused with another key: {message}");
             message
         }
@@ -106,38 +102,18 @@ fn test01_cornell_box_loads() {
     assert_eq!(scene.environment, [0.0; 3]);
     assert_eq!(
         scene.settings,
-        Settings {
-            patch_size: 40.0,
-            hemicube_resolution: 512,
-            bundle_resolution: 512,
-            iterations: 1000,
-            seed: 1,
-        }
+        Settings { patch_size: 40.0, hemicube_resolution: 512, bundle_resolution: 512, iterations: 1000, seed: 1 }
     );
-    let [
-        Light::Area {
-            radiance,
-            subdivisions,
-            ..
-        },
-    ] = scene.lights[..]
-    else {
+    let [Light::Area { radiance, subdivisions, .. }] = scene.lights[..] else {
         panic!("expected one area light: {:?}", scene.lights);
     };
     assert_eq!(radiance, [18.387, 13.9873, 6.75357]);
     assert_eq!(subdivisions, 2);
     // The right wall is green.
     let green = scene.materials.iter().position(|m| m.name == "green");
-    assert_eq!(
-        Some(scene.surfaces[3].triangles[0].material as usize),
-        green
-    );
+    assert_eq!(Some(scene.surfaces[3].triangles[0].material as usize), green);
     // The floor is 552.8 x 559.2 less a sliver: measured corners, two triangles.
-    let floor: f64 = scene.surfaces[0]
-        .triangles
-        .iter()
-        .map(|t| triangle_area(&t.vertices))
-        .sum();
+    let floor: f64 = scene.surfaces[0].triangles.iter().map(|t| triangle_area(&t.vertices)).sum();
     assert!((floor - 0.5 * (552.8 * 559.2 + 549.6 * 559.2)).abs() < 1e-6);
 }
 
@@ -153,23 +129,14 @@ fn test02_defaults() {
         "type = \"area\"\nvertices = [[0, 3, 0], [1, 3, 0], [1, 3, 1], [0, 3, 1]]\nradiance = [1, 1, 1]",
     )]);
     let scene = load_str(&area, source()).unwrap();
-    assert!(matches!(
-        scene.lights[0],
-        Light::Area {
-            subdivisions: 1,
-            ..
-        }
-    ));
+    assert!(matches!(scene.lights[0], Light::Area { subdivisions: 1, .. }));
 }
 
 /// The example of SCENE_FORMAT.md, every key of the contract, loads as written.
 #[test]
 fn test03_the_contract_example_loads() {
     let dir = scratch("contract");
-    write(
-        &dir.join("meshes/bunny.obj"),
-        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n",
-    );
+    write(&dir.join("meshes/bunny.obj"), "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
     let text = r#"
 format = 1
 [camera]
@@ -245,11 +212,7 @@ subdivisions = 2
     assert_eq!(gloss.name, "gloss");
     assert_eq!(
         gloss.kind,
-        MaterialKind::Phong {
-            diffuse: [0.18, 0.06, 0.12],
-            specular: [0.6, 0.6, 0.6],
-            shininess: 3.0
-        }
+        MaterialKind::Phong { diffuse: [0.18, 0.06, 0.12], specular: [0.6, 0.6, 0.6], shininess: 3.0 }
     );
 }
 
@@ -273,13 +236,7 @@ level = 2
 material = "white"
 "#;
     let scene = load_str(&format!("{MINIMAL}{shapes}"), source()).unwrap();
-    let area = |s: usize| -> f64 {
-        scene.surfaces[s]
-            .triangles
-            .iter()
-            .map(|t| triangle_area(&t.vertices))
-            .sum()
-    };
+    let area = |s: usize| -> f64 { scene.surfaces[s].triangles.iter().map(|t| triangle_area(&t.vertices)).sum() };
     let normal = |t: &[DVec3; 3]| (t[1] - t[0]).cross(t[2] - t[0]).normalize();
     let counts: Vec<usize> = scene.surfaces.iter().map(|s| s.triangles.len()).collect();
     assert_eq!(counts, [2, 1, 12, 64]);
@@ -308,11 +265,7 @@ material = "white"
 transform = { scale = [2, 1, 1], rotate = [0, 0, 1, 90], translate = [10, 0, 0] }
 "#;
     let scene = load_str(&format!("{MINIMAL}{shapes}"), source()).unwrap();
-    let points: Vec<DVec3> = scene.surfaces[1]
-        .triangles
-        .iter()
-        .flat_map(|t| t.vertices)
-        .collect();
+    let points: Vec<DVec3> = scene.surfaces[1].triangles.iter().flat_map(|t| t.vertices).collect();
     let lo = points.iter().fold(DVec3::INFINITY, |a, &b| a.min(b));
     let hi = points.iter().fold(DVec3::NEG_INFINITY, |a, &b| a.max(b));
     // x in [0, 2] after scaling, turned onto y in [0, 2]; y in [0, 1] onto x in [-1, 0].
@@ -357,24 +310,12 @@ f 1 2 -1
     let mesh = &scene.surfaces[0];
     assert_eq!(mesh.origin, "shapes[0] (mesh \"meshes/thing.obj\")");
     assert_eq!(mesh.triangles.len(), 2 + 3 + 1);
-    let name = |t: usize| {
-        scene.materials[mesh.triangles[t].material as usize]
-            .name
-            .as_str()
-    };
+    let name = |t: usize| scene.materials[mesh.triangles[t].material as usize].name.as_str();
     let names: Vec<&str> = (0..6).map(name).collect();
     assert_eq!(names, ["white", "white", "red", "red", "red", "white"]);
-    let area: f64 = mesh.triangles[2..5]
-        .iter()
-        .map(|t| triangle_area(&t.vertices))
-        .sum();
+    let area: f64 = mesh.triangles[2..5].iter().map(|t| triangle_area(&t.vertices)).sum();
     assert!((area - 1.25).abs() < EPS);
-    assert!(
-        mesh.triangles
-            .iter()
-            .flat_map(|t| t.vertices)
-            .all(|v| v.z >= 5.0)
-    );
+    assert!(mesh.triangles.iter().flat_map(|t| t.vertices).all(|v| v.z >= 5.0));
 }
 
 #[test]
@@ -383,15 +324,9 @@ fn test07_mesh_material_is_optional_only_if_every_face_has_usemtl() {
     let mesh = "[[shapes]]\ntype = \"mesh\"\nfile = \"meshes/m.obj\"\n\n[[shapes]]";
     let path = dir.join("scene.toml");
     write(&path, edited(&[("[[shapes]]", mesh)]));
-    write(
-        &dir.join("meshes/m.obj"),
-        "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl white\nf 1 2 3\n",
-    );
+    write(&dir.join("meshes/m.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl white\nf 1 2 3\n");
     assert!(load(&path).is_ok());
-    write(
-        &dir.join("meshes/m.obj"),
-        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
-    );
+    write(&dir.join("meshes/m.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     let message = refused_at(load(&path), "meshes/m.obj line 4");
     assert_contains(&message, "no `usemtl`");
 }
@@ -409,21 +344,9 @@ fn test08_obj_errors_name_the_mesh_file_and_line() {
     );
     let cases = [
         ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", 4, "zero area"),
-        (
-            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3 4\n",
-            5,
-            "not convex",
-        ),
-        (
-            "v 0 0 0\nv 1 0 0\nv 1 1 1\nv 0 1 0\nf 1 2 3 4\n",
-            5,
-            "not planar",
-        ),
-        (
-            "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl gold\nf 1 2 3\n",
-            4,
-            "unknown material \"gold\"",
-        ),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3 4\n", 5, "not convex"),
+        ("v 0 0 0\nv 1 0 0\nv 1 1 1\nv 0 1 0\nf 1 2 3 4\n", 5, "not planar"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl gold\nf 1 2 3\n", 4, "unknown material \"gold\""),
         ("v 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n", 3, "finite"),
         ("v 0 0 0\nf 1 2 3\n", 2, "does not exist"),
     ];
@@ -476,67 +399,24 @@ fn test10_scene_file_problems() {
 #[test]
 fn test11_format_and_camera_refusals() {
     refused(&edited(&[("format = 1", "")]), "format");
-    assert_contains(
-        &refused(&edited(&[("format = 1", "format = 2")]), "format"),
-        "format 1",
-    );
+    assert_contains(&refused(&edited(&[("format = 1", "format = 2")]), "format"), "format 1");
     refused(&edited(&[("format = 1", "format = \"1\"")]), "format");
     refused("format = 1", "camera");
     for (from, to, key, part) in [
-        (
-            "width = 64",
-            "width = 0",
-            "camera.width",
-            "from 1 to 16384, got 0",
-        ),
+        ("width = 64", "width = 0", "camera.width", "from 1 to 16384, got 0"),
         ("width = 64", "width = 16385", "camera.width", "16384"),
-        (
-            "height = 48",
-            "height = 48.0",
-            "camera.height",
-            "expected an integer",
-        ),
+        ("height = 48", "height = 48.0", "camera.height", "expected an integer"),
         ("fov_y = 40", "fov_y = 0", "camera.fov_y", "got 0"),
         ("fov_y = 40", "fov_y = 180", "camera.fov_y", "< 180"),
         ("fov_y = 40", "", "camera.fov_y", "required"),
-        (
-            "look_at = [0, 1, 0]",
-            "look_at = [0, 1, -5]",
-            "camera.look_at",
-            "camera.position",
-        ),
+        ("look_at = [0, 1, 0]", "look_at = [0, 1, -5]", "camera.look_at", "camera.position"),
         ("up = [0, 1, 0]", "up = [0, 0, 2]", "camera.up", "parallel"),
         ("up = [0, 1, 0]", "up = [0, 0, 0]", "camera.up", "zero"),
-        (
-            "up = [0, 1, 0]",
-            "up = [0, 1]",
-            "camera.up",
-            "expected 3 numbers",
-        ),
-        (
-            "up = [0, 1, 0]",
-            "up = [0, \"1\", 0]",
-            "camera.up[1]",
-            "expected a number",
-        ),
-        (
-            "position = [0, 1, -5]",
-            "position = [0, nan, -5]",
-            "camera.position[1]",
-            "finite",
-        ),
-        (
-            "position = [0, 1, -5]",
-            "position = [0, 1, -inf]",
-            "camera.position[2]",
-            "finite",
-        ),
-        (
-            "position = [0, 1, -5]",
-            "position = [0, 1e39, -5]",
-            "camera.position[1]",
-            "range",
-        ),
+        ("up = [0, 1, 0]", "up = [0, 1]", "camera.up", "expected 3 numbers"),
+        ("up = [0, 1, 0]", "up = [0, \"1\", 0]", "camera.up[1]", "expected a number"),
+        ("position = [0, 1, -5]", "position = [0, nan, -5]", "camera.position[1]", "finite"),
+        ("position = [0, 1, -5]", "position = [0, 1, -inf]", "camera.position[2]", "finite"),
+        ("position = [0, 1, -5]", "position = [0, 1e39, -5]", "camera.position[1]", "range"),
     ] {
         let message = refused(&edited(&[(from, to)]), key);
         assert_contains(&message, part);
@@ -546,32 +426,16 @@ fn test11_format_and_camera_refusals() {
 #[test]
 fn test12_settings_and_environment_refusals() {
     let with = |settings: &str| format!("{MINIMAL}\n[settings]\n{settings}\n");
-    assert_contains(
-        &refused(&with("patch_size = -1"), "settings.patch_size"),
-        "must be > 0, got -1",
-    );
+    assert_contains(&refused(&with("patch_size = -1"), "settings.patch_size"), "must be > 0, got -1");
     refused(&with("patch_size = 0"), "settings.patch_size");
     refused(&with("patch_size = inf"), "settings.patch_size");
-    refused(
-        &with("hemicube_resolution = 0"),
-        "settings.hemicube_resolution",
-    );
-    refused(
-        &with("hemicube_resolution = 16385"),
-        "settings.hemicube_resolution",
-    );
+    refused(&with("hemicube_resolution = 0"), "settings.hemicube_resolution");
+    refused(&with("hemicube_resolution = 16385"), "settings.hemicube_resolution");
     refused(&with("bundle_resolution = 0"), "settings.bundle_resolution");
-    refused(
-        &with("bundle_resolution = 1e9"),
-        "settings.bundle_resolution",
-    );
+    refused(&with("bundle_resolution = 1e9"), "settings.bundle_resolution");
     refused(&with("iterations = -1"), "settings.iterations");
     refused(&with("seed = -1"), "settings.seed");
-    let scene = load_str(
-        &with("iterations = 0\nseed = 7\npatch_size = 0.5"),
-        source(),
-    )
-    .unwrap();
+    let scene = load_str(&with("iterations = 0\nseed = 7\npatch_size = 0.5"), source()).unwrap();
     assert_eq!(scene.settings.iterations, 0);
     assert_eq!(scene.settings.seed, 7);
     assert_eq!(scene.settings.patch_size, 0.5);
@@ -586,64 +450,19 @@ fn test13_material_refusals() {
     let with = |m: &str| format!("{MINIMAL}\n{m}");
     assert!(load_str(&with(gloss), source()).is_ok());
     for (from, to, key, part) in [
-        (
-            "shininess = 10",
-            "shininess = -1",
-            "materials.gloss.shininess",
-            "must be >= 0, got -1",
-        ),
-        (
-            "specular = [0.2, 0.2, 0.2]",
-            "specular = [0.2, -0.2, 0.2]",
-            "materials.gloss.specular",
-            "green",
-        ),
-        (
-            "diffuse = [0.1, 0.1, 0.1]",
-            "diffuse = [-1, 0.1, 0.1]",
-            "materials.gloss.diffuse",
-            ">= 0",
-        ),
-        (
-            "diffuse = [0.1, 0.1, 0.1]",
-            "",
-            "materials.gloss.diffuse",
-            "required",
-        ),
-        (
-            "type = \"phong\"",
-            "type = \"glass\"",
-            "materials.gloss.type",
-            "\"diffuse\" or \"phong\"",
-        ),
-        (
-            "shininess = 10",
-            "shininess = 10\nalbedo = [1, 1, 1]",
-            "materials.gloss.albedo",
-            "unknown key",
-        ),
+        ("shininess = 10", "shininess = -1", "materials.gloss.shininess", "must be >= 0, got -1"),
+        ("specular = [0.2, 0.2, 0.2]", "specular = [0.2, -0.2, 0.2]", "materials.gloss.specular", "green"),
+        ("diffuse = [0.1, 0.1, 0.1]", "diffuse = [-1, 0.1, 0.1]", "materials.gloss.diffuse", ">= 0"),
+        ("diffuse = [0.1, 0.1, 0.1]", "", "materials.gloss.diffuse", "required"),
+        ("type = \"phong\"", "type = \"glass\"", "materials.gloss.type", "\"diffuse\" or \"phong\""),
+        ("shininess = 10", "shininess = 10\nalbedo = [1, 1, 1]", "materials.gloss.albedo", "unknown key"),
     ] {
         assert_contains(&refused(&with(&gloss.replace(from, to)), key), part);
     }
     let albedo = |a: &str| edited(&[("albedo = [0.5, 0.5, 0.5]", a)]);
-    assert_contains(
-        &refused(
-            &albedo("albedo = [0.5, 1.5, 0.5]"),
-            "materials.white.albedo",
-        ),
-        "<= 1",
-    );
-    assert_contains(
-        &refused(
-            &albedo("albedo = [0.5, -0.5, 0.5]"),
-            "materials.white.albedo",
-        ),
-        ">= 0",
-    );
-    refused(
-        &albedo("albedo = [0.5, 0.5, nan]"),
-        "materials.white.albedo[2]",
-    );
+    assert_contains(&refused(&albedo("albedo = [0.5, 1.5, 0.5]"), "materials.white.albedo"), "<= 1");
+    assert_contains(&refused(&albedo("albedo = [0.5, -0.5, 0.5]"), "materials.white.albedo"), ">= 0");
+    refused(&albedo("albedo = [0.5, 0.5, nan]"), "materials.white.albedo[2]");
     refused(&albedo("albedo = 0.5"), "materials.white.albedo");
     let quoted = with("[materials.\"my gloss\"]\ntype = \"diffuse\"\nalbedo = [2, 0, 0]\n");
     refused(&quoted, "materials.\"my gloss\".albedo");
@@ -652,11 +471,7 @@ fn test13_material_refusals() {
 /// Holds once `brdf::max_directional_albedo` is written; until then it says it skipped.
 #[test]
 fn test14_energy_gaining_material_is_refused() {
-    let kind = MaterialKind::Phong {
-        diffuse: [0.9, 0.9, 0.9],
-        specular: [0.9, 0.9, 0.9],
-        shininess: 0.0,
-    };
+    let kind = MaterialKind::Phong { diffuse: [0.9, 0.9, 0.9], specular: [0.9, 0.9, 0.9], shininess: 0.0 };
     let albedo = brdf::max_directional_albedo(&kind);
     let text = format!(
         "{MINIMAL}\n[materials.hot]\ntype = \"phong\"\ndiffuse = [0.9, 0.9, 0.9]\n\
@@ -675,170 +490,69 @@ fn test14_energy_gaining_material_is_refused() {
 fn test15_shape_refusals() {
     let quad = "vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, 1], [1, 0, -1]]";
     for (to, key, part) in [
-        (
-            "vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, 1], [1, 0, 1]]",
-            "shapes[0].vertices",
-            "zero area",
-        ),
-        (
-            "vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, -1], [1, 0, 1]]",
-            "shapes[0].vertices",
-            "not convex",
-        ),
-        (
-            "vertices = [[-1, 0, -1], [-1, 0, 1], [1, 1, 1], [1, 0, -1]]",
-            "shapes[0].vertices",
-            "not planar",
-        ),
-        (
-            "vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, 1]]",
-            "shapes[0].vertices",
-            "expected 4 points",
-        ),
-        (
-            "vertices = [[-1, 0, -1], [-1, 0], [1, 0, 1], [1, 0, -1]]",
-            "shapes[0].vertices[1]",
-            "expected 3 numbers",
-        ),
-        (
-            "vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, nan], [1, 0, -1]]",
-            "shapes[0].vertices[2][2]",
-            "finite",
-        ),
+        ("vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, 1], [1, 0, 1]]", "shapes[0].vertices", "zero area"),
+        ("vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, -1], [1, 0, 1]]", "shapes[0].vertices", "not convex"),
+        ("vertices = [[-1, 0, -1], [-1, 0, 1], [1, 1, 1], [1, 0, -1]]", "shapes[0].vertices", "not planar"),
+        ("vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, 1]]", "shapes[0].vertices", "expected 4 points"),
+        ("vertices = [[-1, 0, -1], [-1, 0], [1, 0, 1], [1, 0, -1]]", "shapes[0].vertices[1]", "expected 3 numbers"),
+        ("vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, nan], [1, 0, -1]]", "shapes[0].vertices[2][2]", "finite"),
         ("", "shapes[0].vertices", "required"),
     ] {
         assert_contains(&refused(&edited(&[(quad, to)]), key), part);
     }
-    let triangle = |v: &str| {
-        format!(
-            "{MINIMAL}\n[[shapes]]\ntype = \"triangle\"\nvertices = {v}\nmaterial = \"white\"\n"
-        )
-    };
-    assert_contains(
-        &refused(
-            &triangle("[[0, 0, 0], [1, 1, 1], [2, 2, 2]]"),
-            "shapes[1].vertices",
-        ),
-        "zero area",
-    );
-    assert_contains(
-        &refused(
-            &triangle("[[0, 0, 0], [0, 0, 0], [0, 0, 0]]"),
-            "shapes[1].vertices",
-        ),
-        "zero area",
-    );
+    let triangle =
+        |v: &str| format!("{MINIMAL}\n[[shapes]]\ntype = \"triangle\"\nvertices = {v}\nmaterial = \"white\"\n");
+    assert_contains(&refused(&triangle("[[0, 0, 0], [1, 1, 1], [2, 2, 2]]"), "shapes[1].vertices"), "zero area");
+    assert_contains(&refused(&triangle("[[0, 0, 0], [0, 0, 0], [0, 0, 0]]"), "shapes[1].vertices"), "zero area");
 
     let material = "material = \"white\"";
     assert_contains(
-        &refused(
-            &edited(&[(material, "material = \"whte\"")]),
-            "shapes[0].material",
-        ),
+        &refused(&edited(&[(material, "material = \"whte\"")]), "shapes[0].material"),
         "unknown material \"whte\"",
     );
+    assert_contains(&refused(&edited(&[(material, "")]), "shapes[0].material"), "required");
     assert_contains(
-        &refused(&edited(&[(material, "")]), "shapes[0].material"),
-        "required",
-    );
-    assert_contains(
-        &refused(
-            &edited(&[(material, "material = \"white\"\nemission = [1, -2, 0]")]),
-            "shapes[0].emission",
-        ),
+        &refused(&edited(&[(material, "material = \"white\"\nemission = [1, -2, 0]")]), "shapes[0].emission"),
         ">= 0",
     );
-    refused(
-        &edited(&[(material, "material = \"white\"\ntwo_sided = 1")]),
-        "shapes[0].two_sided",
-    );
+    refused(&edited(&[(material, "material = \"white\"\ntwo_sided = 1")]), "shapes[0].two_sided");
     assert_contains(
-        &refused(
-            &edited(&[(material, "material = \"white\"\ntransform = { scale = 2 }")]),
-            "shapes[0].transform",
-        ),
+        &refused(&edited(&[(material, "material = \"white\"\ntransform = { scale = 2 }")]), "shapes[0].transform"),
         "only mesh, box and sierpinski",
     );
-    assert_contains(
-        &refused(
-            &edited(&[("type = \"quad\"", "type = \"disc\"")]),
-            "shapes[0].type",
-        ),
-        "\"sierpinski\"",
-    );
+    assert_contains(&refused(&edited(&[("type = \"quad\"", "type = \"disc\"")]), "shapes[0].type"), "\"sierpinski\"");
     refused(&edited(&[("type = \"quad\"", "")]), "shapes[0].type");
 
     let shape = |body: &str| format!("{MINIMAL}\n[[shapes]]\nmaterial = \"white\"\n{body}\n");
     let cube = "type = \"box\"\nmin = [0, 0, 0]\nmax = [1, 1, 1]";
     assert!(load_str(&shape(cube), source()).is_ok());
     assert_contains(
-        &refused(
-            &shape("type = \"box\"\nmin = [0, 0, 0]\nmax = [1, 0, 1]"),
-            "shapes[1].max",
-        ),
+        &refused(&shape("type = \"box\"\nmin = [0, 0, 0]\nmax = [1, 0, 1]"), "shapes[1].max"),
         "greater than min",
     );
     let transformed = |t: &str| shape(&format!("{cube}\ntransform = {t}"));
+    assert_contains(&refused(&transformed("{ scale = 0 }"), "shapes[1].transform.scale"), "must be > 0, got 0");
     assert_contains(
-        &refused(&transformed("{ scale = 0 }"), "shapes[1].transform.scale"),
-        "must be > 0, got 0",
-    );
-    assert_contains(
-        &refused(
-            &transformed("{ scale = [1, -1, 1] }"),
-            "shapes[1].transform.scale[1]",
-        ),
+        &refused(&transformed("{ scale = [1, -1, 1] }"), "shapes[1].transform.scale[1]"),
         "must be > 0, got -1",
     );
-    refused(
-        &transformed("{ scale = [1, 1] }"),
-        "shapes[1].transform.scale",
-    );
+    refused(&transformed("{ scale = [1, 1] }"), "shapes[1].transform.scale");
+    assert_contains(&refused(&transformed("{ rotate = [0, 0, 0, 30] }"), "shapes[1].transform.rotate"), "axis");
     assert_contains(
-        &refused(
-            &transformed("{ rotate = [0, 0, 0, 30] }"),
-            "shapes[1].transform.rotate",
-        ),
-        "axis",
-    );
-    assert_contains(
-        &refused(
-            &transformed("{ rotate = [0, 1, 0] }"),
-            "shapes[1].transform.rotate",
-        ),
+        &refused(&transformed("{ rotate = [0, 1, 0] }"), "shapes[1].transform.rotate"),
         "expected 4 numbers",
     );
-    refused(
-        &transformed("{ translate = [0, 1, inf] }"),
-        "shapes[1].transform.translate[2]",
-    );
-    assert_contains(
-        &refused(&transformed("{ shear = 1 }"), "shapes[1].transform.shear"),
-        "scale, rotate, translate",
-    );
+    refused(&transformed("{ translate = [0, 1, inf] }"), "shapes[1].transform.translate[2]");
+    assert_contains(&refused(&transformed("{ shear = 1 }"), "shapes[1].transform.shear"), "scale, rotate, translate");
     // A legal but extreme transform that makes the geometry overflow or vanish.
-    assert_contains(
-        &refused(
-            &transformed("{ scale = 1e38, translate = [3e38, 0, 0] }"),
-            "shapes[1]",
-        ),
-        "out of range",
-    );
-    assert_contains(
-        &refused(&transformed("{ scale = 1e-200 }"), "shapes[1]"),
-        "zero area",
-    );
+    assert_contains(&refused(&transformed("{ scale = 1e38, translate = [3e38, 0, 0] }"), "shapes[1]"), "out of range");
+    assert_contains(&refused(&transformed("{ scale = 1e-200 }"), "shapes[1]"), "zero area");
 
     let sierpinski = |level: &str, size: &str| {
-        shape(&format!(
-            "type = \"sierpinski\"\ncenter = [0, 0, 0]\nsize = {size}\nlevel = {level}"
-        ))
+        shape(&format!("type = \"sierpinski\"\ncenter = [0, 0, 0]\nsize = {size}\nlevel = {level}"))
     };
     assert!(load_str(&sierpinski("8", "1"), source()).is_ok());
-    assert_contains(
-        &refused(&sierpinski("9", "1"), "shapes[1].level"),
-        "from 0 to 8, got 9",
-    );
+    assert_contains(&refused(&sierpinski("9", "1"), "shapes[1].level"), "from 0 to 8, got 9");
     refused(&sierpinski("50", "1"), "shapes[1].level");
     refused(&sierpinski("-1", "1"), "shapes[1].level");
     refused(&sierpinski("9223372036854775807", "1"), "shapes[1].level");
@@ -850,25 +564,17 @@ fn test15_shape_refusals() {
 fn test16_light_refusals() {
     let light = |body: &str| format!("{MINIMAL}\n[[lights]]\n{body}\n");
     let area = |vertices: &str, rest: &str| {
-        light(&format!(
-            "type = \"area\"\nvertices = {vertices}\nradiance = [1, 1, 1]\n{rest}"
-        ))
+        light(&format!("type = \"area\"\nvertices = {vertices}\nradiance = [1, 1, 1]\n{rest}"))
     };
     let square = "[[0, 2, 0], [1, 2, 0], [1, 2, 1], [0, 2, 1]]";
     assert!(load_str(&area(square, "subdivisions = 64"), source()).is_ok());
     for (vertices, part) in [
-        (
-            "[[0, 2, 0], [1, 2, 0], [1, 2.001, 1], [0, 2, 1]]",
-            "not planar",
-        ),
+        ("[[0, 2, 0], [1, 2, 0], [1, 2.001, 1], [0, 2, 1]]", "not planar"),
         ("[[0, 2, 0], [1, 2, 0], [0, 2, 1], [1, 2, 1]]", "not convex"),
         ("[[0, 2, 0], [1, 2, 0], [2, 2, 0], [3, 2, 0]]", "zero area"),
         ("[[0, 2, 0], [1, 2, 0], [1, 2, 1], [1, 2, 1]]", "zero area"),
         ("[[0, 2, 0], [1, 2, 0], [1, 2, 1]]", "expected 4 points"),
-        (
-            "[[0, 2, 0], [1, 2, 0], [1, 2, 1], [0, 2, 1], [0, 2, 0.5]]",
-            "expected 4 points",
-        ),
+        ("[[0, 2, 0], [1, 2, 0], [1, 2, 1], [0, 2, 1], [0, 2, 0.5]]", "expected 4 points"),
     ] {
         assert_contains(&refused(&area(vertices, ""), "lights[1].vertices"), part);
     }
@@ -894,33 +600,17 @@ fn test16_light_refusals() {
         }
     }
     for n in ["0", "65", "100000000000", "1.5", "-1"] {
-        refused(
-            &area(square, &format!("subdivisions = {n}")),
-            "lights[1].subdivisions",
-        );
+        refused(&area(square, &format!("subdivisions = {n}")), "lights[1].subdivisions");
     }
-    let message = refused(
-        &area(square, "").replace("radiance = [1, 1, 1]", "radiance = [1, 1, -1]"),
-        "lights[1].radiance",
-    );
+    let message =
+        refused(&area(square, "").replace("radiance = [1, 1, 1]", "radiance = [1, 1, -1]"), "lights[1].radiance");
     assert_contains(&message, "blue");
-    refused(
-        &light("type = \"point\"\nposition = [0, 1, 0]\npower = [-1, 1, 1]"),
-        "lights[1].power",
-    );
-    refused(
-        &light("type = \"point\"\nposition = [0, 1, 0]"),
-        "lights[1].power",
-    );
-    refused(
-        &light("type = \"spot\"\nposition = [0, 1, 0]"),
-        "lights[1].type",
-    );
+    refused(&light("type = \"point\"\nposition = [0, 1, 0]\npower = [-1, 1, 1]"), "lights[1].power");
+    refused(&light("type = \"point\"\nposition = [0, 1, 0]"), "lights[1].power");
+    refused(&light("type = \"spot\"\nposition = [0, 1, 0]"), "lights[1].type");
     assert_contains(
         &refused(
-            &light(
-                "type = \"point\"\nposition = [0, 1, 0]\npower = [1, 1, 1]\nradiance = [1, 1, 1]",
-            ),
+            &light("type = \"point\"\nposition = [0, 1, 0]\npower = [1, 1, 1]\nradiance = [1, 1, 1]"),
             "lights[1].radiance",
         ),
         "type, position, power",
@@ -932,10 +622,7 @@ fn test17_no_surfaces_and_no_emitters() {
     let no_shapes = MINIMAL.split("[[shapes]]").next().unwrap().to_string()
         + "[[lights]]\ntype = \"point\"\nposition = [0, 3, 0]\npower = [10, 10, 10]\n";
     assert_contains(&refused(&no_shapes, "shapes"), "no surfaces");
-    assert_contains(
-        &refused(&format!("shapes = []\n{no_shapes}"), "shapes"),
-        "no surfaces",
-    );
+    assert_contains(&refused(&format!("shapes = []\n{no_shapes}"), "shapes"), "no surfaces");
     refused(&format!("shapes = 3\n{no_shapes}"), "shapes");
 
     let no_lights = MINIMAL.split("[[lights]]").next().unwrap();
@@ -947,58 +634,30 @@ fn test17_no_surfaces_and_no_emitters() {
     // Any one emitter is enough.
     let sky = format!("{no_lights}\n[environment]\nradiance = [0, 0, 0.1]\n");
     assert!(load_str(&sky, source()).is_ok());
-    let glowing = no_lights.replace(
-        "material = \"white\"",
-        "material = \"white\"\nemission = [0, 1, 0]",
-    );
+    let glowing = no_lights.replace("material = \"white\"", "material = \"white\"\nemission = [0, 1, 0]");
     assert!(load_str(&glowing, source()).is_ok());
 }
 
 #[test]
 fn test18_unknown_keys_are_refused_with_the_allowed_ones() {
     for (text, key, allowed) in [
-        (
-            format!("colour = 1\n{MINIMAL}"),
-            "colour",
-            "format, camera, environment",
-        ),
+        (format!("colour = 1\n{MINIMAL}"), "colour", "format, camera, environment"),
         (format!("fmt = 1\n{MINIMAL}"), "fmt", "format, camera"),
+        (edited(&[("fov_y = 40", "fov_y = 40\nfov_x = 40")]), "camera.fov_x", "position, look_at, up, fov_y"),
+        (format!("{MINIMAL}\n[settings]\nspp = 4\n"), "settings.spp", "patch_size, hemicube_resolution"),
+        (format!("{MINIMAL}\n[environment]\ncolor = [1, 1, 1]\n"), "environment.color", "radiance"),
         (
-            edited(&[("fov_y = 40", "fov_y = 40\nfov_x = 40")]),
-            "camera.fov_x",
-            "position, look_at, up, fov_y",
-        ),
-        (
-            format!("{MINIMAL}\n[settings]\nspp = 4\n"),
-            "settings.spp",
-            "patch_size, hemicube_resolution",
-        ),
-        (
-            format!("{MINIMAL}\n[environment]\ncolor = [1, 1, 1]\n"),
-            "environment.color",
-            "radiance",
-        ),
-        (
-            edited(&[(
-                "albedo = [0.5, 0.5, 0.5]",
-                "albedo = [0.5, 0.5, 0.5]\nroughness = 1",
-            )]),
+            edited(&[("albedo = [0.5, 0.5, 0.5]", "albedo = [0.5, 0.5, 0.5]\nroughness = 1")]),
             "materials.white.roughness",
             "type, albedo",
         ),
         (
-            edited(&[(
-                "material = \"white\"",
-                "material = \"white\"\nname = \"floor\"",
-            )]),
+            edited(&[("material = \"white\"", "material = \"white\"\nname = \"floor\"")]),
             "shapes[0].name",
             "two_sided, vertices",
         ),
         (
-            edited(&[(
-                "power = [10, 10, 10]",
-                "power = [10, 10, 10]\nsubdivisions = 2",
-            )]),
+            edited(&[("power = [10, 10, 10]", "power = [10, 10, 10]\nsubdivisions = 2")]),
             "lights[0].subdivisions",
             "position, power",
         ),
@@ -1097,22 +756,13 @@ fn shape_entry() -> impl Strategy<Value = String> {
             .prop_map(str::to_string),
     ];
     let point = prop::array::uniform3(number.clone()).prop_map(|p| format!("[{}]", p.join(", ")));
-    let kind = prop::sample::select(vec![
-        "quad",
-        "triangle",
-        "box",
-        "sierpinski",
-        "mesh",
-        "disc",
-    ]);
+    let kind = prop::sample::select(vec!["quad", "triangle", "box", "sierpinski", "mesh", "disc"]);
     let transform = prop_oneof![
         Just(String::new()),
-        (number.clone(), point.clone(), number.clone(), point.clone()).prop_map(
-            |(s, axis, angle, t)| {
-                let axis = axis.trim_end_matches(']');
-                format!("transform = {{ scale = {s}, rotate = {axis}, {angle}], translate = {t} }}")
-            }
-        ),
+        (number.clone(), point.clone(), number.clone(), point.clone()).prop_map(|(s, axis, angle, t)| {
+            let axis = axis.trim_end_matches(']');
+            format!("transform = {{ scale = {s}, rotate = {axis}, {angle}], translate = {t} }}")
+        }),
     ];
     (
         kind,
@@ -1123,10 +773,7 @@ fn shape_entry() -> impl Strategy<Value = String> {
         transform,
     )
         .prop_map(|(kind, points, size, level, transform)| {
-            let first = points
-                .first()
-                .cloned()
-                .unwrap_or_else(|| "[0, 0, 0]".into());
+            let first = points.first().cloned().unwrap_or_else(|| "[0, 0, 0]".into());
             let last = points.last().cloned().unwrap_or_else(|| "[1, 1, 1]".into());
             let body = match kind {
                 "quad" | "triangle" | "disc" => format!("vertices = [{}]", points.join(", ")),

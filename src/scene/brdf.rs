@@ -23,11 +23,7 @@ pub fn eval(kind: &MaterialKind, n: DVec3, w_in: DVec3, w_out: DVec3) -> [f64; 3
     }
     match *kind {
         MaterialKind::Diffuse { albedo } => albedo.map(|a| f64::from(a) / PI),
-        MaterialKind::Phong {
-            diffuse,
-            specular,
-            shininess,
-        } => {
+        MaterialKind::Phong { diffuse, specular, shininess } => {
             // (2 cos_in n - w_in) . w_out, written so that swapping the two directions gives
             // the same float: reciprocity holds bit for bit.
             let cos_psi = 2.0 * cos_in * cos_out - w_in.dot(w_out);
@@ -46,11 +42,7 @@ pub fn eval(kind: &MaterialKind, n: DVec3, w_in: DVec3, w_out: DVec3) -> [f64; 3
 pub fn directional_albedo(kind: &MaterialKind, cos_theta_in: f64) -> [f64; 3] {
     match *kind {
         MaterialKind::Diffuse { albedo } => albedo.map(f64::from),
-        MaterialKind::Phong {
-            diffuse,
-            specular,
-            shininess,
-        } => {
+        MaterialKind::Phong { diffuse, specular, shininess } => {
             let lobe = lobe_albedo(f64::from(shininess), cos_theta_in);
             std::array::from_fn(|c| f64::from(diffuse[c]) + f64::from(specular[c]) * lobe)
         }
@@ -62,11 +54,7 @@ pub fn directional_albedo(kind: &MaterialKind, cos_theta_in: f64) -> [f64; 3] {
 pub fn max_directional_albedo(kind: &MaterialKind) -> Rgb {
     match *kind {
         MaterialKind::Diffuse { albedo } => albedo,
-        MaterialKind::Phong {
-            diffuse,
-            specular,
-            shininess,
-        } => {
+        MaterialKind::Phong { diffuse, specular, shininess } => {
             let lobe = max_lobe_albedo(f64::from(shininess));
             std::array::from_fn(|c| (f64::from(diffuse[c]) + f64::from(specular[c]) * lobe) as f32)
         }
@@ -99,11 +87,7 @@ fn lobe_albedo(shininess: f64, mu: f64) -> f64 {
         let (a, b) = (mu * cos_psi, sin_in * sin_psi);
         let reflected = |phi: f64| {
             let cos_out = (a - b * phi.cos()).max(0.0);
-            if cos_out > 0.0 {
-                cos_out / mu.max(cos_out)
-            } else {
-                0.0
-            }
+            if cos_out > 0.0 { cos_out / mu.max(cos_out) } else { 0.0 }
         };
         if b <= 0.0 {
             return 2.0 * PI * reflected(0.0);
@@ -166,13 +150,8 @@ fn max_lobe_albedo(shininess: f64) -> f64 {
     }
     grid.sort_by(f64::total_cmp);
     let values: Vec<f64> = grid.iter().map(|&t| lobe(t)).collect();
-    let best = (0..grid.len())
-        .max_by(|&i, &j| values[i].total_cmp(&values[j]))
-        .unwrap_or(0);
-    let (mut lo, mut hi) = (
-        grid[best.saturating_sub(1)],
-        grid[(best + 1).min(grid.len() - 1)],
-    );
+    let best = (0..grid.len()).max_by(|&i, &j| values[i].total_cmp(&values[j])).unwrap_or(0);
+    let (mut lo, mut hi) = (grid[best.saturating_sub(1)], grid[(best + 1).min(grid.len() - 1)]);
     let ratio = 0.5 * (5f64.sqrt() - 1.0);
     let mut best_value = values[best];
     for _ in 0..40 {
@@ -218,10 +197,7 @@ fn gauss_legendre_rule() -> &'static [(f64, f64)] {
 
 fn gauss_legendre(from: f64, to: f64, f: impl Fn(f64) -> f64) -> f64 {
     let (mid, half) = (0.5 * (from + to), 0.5 * (to - from));
-    half * gauss_legendre_rule()
-        .iter()
-        .map(|&(x, w)| w * f(mid + half * x))
-        .sum::<f64>()
+    half * gauss_legendre_rule().iter().map(|&(x, w)| w * f(mid + half * x)).sum::<f64>()
 }
 
 #[cfg(test)]
@@ -234,11 +210,7 @@ mod tests {
     const QUADRATURE: f64 = 1e-8;
 
     fn phong(kd: f32, ks: f32, n: f32) -> MaterialKind {
-        MaterialKind::Phong {
-            diffuse: [kd, 0.5 * kd, 0.0],
-            specular: [ks, ks, 0.5 * ks],
-            shininess: n,
-        }
+        MaterialKind::Phong { diffuse: [kd, 0.5 * kd, 0.0], specular: [ks, ks, 0.5 * ks], shininess: n }
     }
 
     fn uniform(rng: &mut Pcg64) -> f64 {
@@ -270,17 +242,11 @@ mod tests {
             phong(0.18, 2.0 / PI as f32, 3.0),
             phong(0.0, 1.0, 0.0),
             phong(0.3, 0.5, 250.0),
-            MaterialKind::Diffuse {
-                albedo: [0.2, 0.5, 0.9],
-            },
+            MaterialKind::Diffuse { albedo: [0.2, 0.5, 0.9] },
         ];
         let mut above = 0;
         for _ in 0..20_000 {
-            let (n, a, b) = (
-                on_sphere(&mut rng),
-                on_sphere(&mut rng),
-                on_sphere(&mut rng),
-            );
+            let (n, a, b) = (on_sphere(&mut rng), on_sphere(&mut rng), on_sphere(&mut rng));
             for m in &materials {
                 assert_eq!(eval(m, n, a, b), eval(m, n, b, a));
             }
@@ -298,13 +264,7 @@ mod tests {
         let up = DVec3::new(0.3, 0.0, 0.9).normalize();
         let down = DVec3::new(0.3, 0.0, -0.9).normalize();
         let grazing = DVec3::X;
-        for (a, b) in [
-            (up, down),
-            (down, up),
-            (down, down),
-            (grazing, up),
-            (up, grazing),
-        ] {
+        for (a, b) in [(up, down), (down, up), (down, down), (grazing, up), (up, grazing)] {
             assert_eq!(eval(&m, n, a, b), [0.0; 3]);
         }
         assert!(eval(&m, n, up, up)[0] > 0.0);
@@ -319,8 +279,7 @@ mod tests {
         let w_in = around(n, 0.8, 0.0);
         let mirror = 2.0 * n.dot(w_in) * n - w_in;
         let w_out = around(n, 0.5, 2.8);
-        let expected =
-            kd / PI + ks * mirror.dot(w_out).max(0.0).powf(n_exp) / n.dot(w_in).max(n.dot(w_out));
+        let expected = kd / PI + ks * mirror.dot(w_out).max(0.0).powf(n_exp) / n.dot(w_in).max(n.dot(w_out));
         assert!((eval(&m, n, w_in, w_out)[0] - expected).abs() < 1e-12);
         // Exactly at the mirror direction the lobe is ks / max(cos, cos) = ks / cos.
         let at_mirror = eval(&m, n, w_in, mirror)[0];
@@ -329,21 +288,13 @@ mod tests {
 
     #[test]
     fn test04_diffuse_albedo_is_kd_exactly() {
-        let diffuse = MaterialKind::Diffuse {
-            albedo: [0.1, 0.5, 0.9],
-        };
+        let diffuse = MaterialKind::Diffuse { albedo: [0.1, 0.5, 0.9] };
         for mu in [0.0, 0.3, 1.0] {
-            assert_eq!(
-                directional_albedo(&diffuse, mu),
-                [0.1f32, 0.5, 0.9].map(f64::from)
-            );
+            assert_eq!(directional_albedo(&diffuse, mu), [0.1f32, 0.5, 0.9].map(f64::from));
         }
         assert_eq!(max_directional_albedo(&diffuse), [0.1, 0.5, 0.9]);
         let no_lobe = phong(0.4, 0.0, 30.0);
-        assert_eq!(
-            directional_albedo(&no_lobe, 0.7),
-            [0.4f32, 0.2, 0.0].map(f64::from)
-        );
+        assert_eq!(directional_albedo(&no_lobe, 0.7), [0.4f32, 0.2, 0.0].map(f64::from));
     }
 
     #[test]
@@ -352,10 +303,7 @@ mod tests {
         for n in shininesses().into_iter().chain([0.0]) {
             let exact = 2.0 * PI / (n + 2.0);
             let s = lobe_albedo(n, 1.0);
-            assert!(
-                (s - exact).abs() <= QUADRATURE * exact,
-                "n = {n}: {s} vs {exact}"
-            );
+            assert!((s - exact).abs() <= QUADRATURE * exact, "n = {n}: {s} vs {exact}");
         }
     }
 
@@ -365,15 +313,9 @@ mod tests {
         for n in shininesses() {
             let exact = PI / (n + 1.0);
             let s = lobe_albedo(n, 0.0);
-            assert!(
-                (s - exact).abs() <= QUADRATURE * exact,
-                "n = {n}: {s} vs {exact}"
-            );
+            assert!((s - exact).abs() <= QUADRATURE * exact, "n = {n}: {s} vs {exact}");
             let near = lobe_albedo(n, 1e-9);
-            assert!(
-                (near - exact).abs() <= 1e-6 * exact,
-                "continuous at grazing"
-            );
+            assert!((near - exact).abs() <= 1e-6 * exact, "continuous at grazing");
         }
         // n = 0: the lobe is 1 everywhere, 2 pi * integral of c / max(mu, c) dc.
         assert!((lobe_albedo(0.0, 0.0) - 2.0 * PI).abs() < 1e-15);
@@ -383,9 +325,7 @@ mod tests {
     /// uniform on the hemisphere for broad lobes, cos^n psi around the mirror for narrow
     /// ones. Returns the estimate of channel 0 and its standard error.
     fn monte_carlo(m: &MaterialKind, mu: f64, samples: usize, seed: u64) -> (f64, f64) {
-        let MaterialKind::Phong { shininess, .. } = *m else {
-            unreachable!()
-        };
+        let MaterialKind::Phong { shininess, .. } = *m else { unreachable!() };
         let shininess = f64::from(shininess);
         let mut rng = Pcg64::seed_from_u64(seed);
         let n = DVec3::new(0.2, -0.4, 0.9).normalize();
@@ -438,11 +378,7 @@ mod tests {
 
     #[test]
     fn test08_papers_material_reflects_98_percent_at_most() {
-        let m = MaterialKind::Phong {
-            diffuse: [0.18, 0.06, 0.12],
-            specular: [2.0 / PI as f32; 3],
-            shininess: 3.0,
-        };
+        let m = MaterialKind::Phong { diffuse: [0.18, 0.06, 0.12], specular: [2.0 / PI as f32; 3], shininess: 3.0 };
         let max = max_directional_albedo(&m);
         assert!((max[0] - 0.98).abs() < 1e-6, "{max:?}");
         assert!(max.iter().all(|&a| a <= 1.0));
@@ -451,25 +387,14 @@ mod tests {
             assert!(directional_albedo(&m, mu)[0] <= f64::from(max[0]) + 1e-7);
             mu += 0.01;
         }
-        #[allow(
-            clippy::approx_constant,
-            reason = "the rounded value in scenes/sierpinski.toml"
-        )]
-        let file_value = MaterialKind::Phong {
-            diffuse: [0.18, 0.06, 0.12],
-            specular: [0.63662; 3],
-            shininess: 3.0,
-        };
+        #[allow(clippy::approx_constant, reason = "the rounded value in scenes/sierpinski.toml")]
+        let file_value = MaterialKind::Phong { diffuse: [0.18, 0.06, 0.12], specular: [0.63662; 3], shininess: 3.0 };
         assert!(max_directional_albedo(&file_value)[0] < 1.0);
     }
 
     #[test]
     fn test09_energy_gaining_materials_exceed_1() {
-        let bright = MaterialKind::Phong {
-            diffuse: [0.0; 3],
-            specular: [1.0; 3],
-            shininess: 3.0,
-        };
+        let bright = MaterialKind::Phong { diffuse: [0.0; 3], specular: [1.0; 3], shininess: 3.0 };
         let max = max_directional_albedo(&bright)[0];
         assert!((f64::from(max) - 2.0 * PI / 5.0).abs() < 1e-6, "{max}");
         assert!(max > 1.0);
@@ -484,9 +409,7 @@ mod tests {
     fn test10_max_is_the_largest_of_a_fine_scan() {
         for n in [0.1, 0.5, 1.0, 2.0, 3.0, 20.0, 1000.0] {
             let max = max_lobe_albedo(n);
-            let scan = (0..=400)
-                .map(|i| lobe_albedo(n, (FRAC_PI_2 * i as f64 / 400.0).cos()))
-                .fold(0.0, f64::max);
+            let scan = (0..=400).map(|i| lobe_albedo(n, (FRAC_PI_2 * i as f64 / 400.0).cos())).fold(0.0, f64::max);
             assert!(max >= scan - 1e-12 && max <= scan * (1.0 + 1e-4), "n = {n}");
         }
     }

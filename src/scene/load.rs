@@ -18,33 +18,16 @@ pub const MAX_RESOLUTION: i64 = 16384;
 /// The largest `subdivisions` of an area light (2 n^2 patches, (n+1)^2 light samples).
 pub const MAX_SUBDIVISIONS: i64 = 64;
 
-const TOP_KEYS: &[&str] = &[
-    "format",
-    "camera",
-    "environment",
-    "settings",
-    "materials",
-    "shapes",
-    "lights",
-];
+const TOP_KEYS: &[&str] = &["format", "camera", "environment", "settings", "materials", "shapes", "lights"];
 const CAMERA_KEYS: &[&str] = &["position", "look_at", "up", "fov_y", "width", "height"];
 const ENVIRONMENT_KEYS: &[&str] = &["radiance"];
-const SETTINGS_KEYS: &[&str] = &[
-    "patch_size",
-    "hemicube_resolution",
-    "bundle_resolution",
-    "iterations",
-    "seed",
-];
+const SETTINGS_KEYS: &[&str] = &["patch_size", "hemicube_resolution", "bundle_resolution", "iterations", "seed"];
 const TRANSFORM_KEYS: &[&str] = &["scale", "rotate", "translate"];
 const SHAPE_TYPES: &str = "\"quad\", \"triangle\", \"mesh\", \"box\" or \"sierpinski\"";
 
 /// Loads and validates a scene file. Errors name the file, the key and what was expected.
 pub fn load(path: &Path) -> Result<Scene> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let at = e.utf8_error().valid_up_to();
         let line = 1 + e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count();
@@ -58,21 +41,12 @@ pub fn load(path: &Path) -> Result<Scene> {
 pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
     let root = parse_toml(text, source)?;
     let cx = Context { file: source };
-    let root = Tbl {
-        cx: &cx,
-        key: String::new(),
-        table: &root,
-    };
+    let root = Tbl { cx: &cx, key: String::new(), table: &root };
 
     // `format` first: a scene of another format should hear that, not about unknown keys.
-    let format = root
-        .req("format", "format = 1")?
-        .integer(i64::MIN, i64::MAX)?;
+    let format = root.req("format", "format = 1")?.integer(i64::MIN, i64::MAX)?;
     if format != 1 {
-        return Err(cx.err(
-            "format",
-            format!("unsupported format {format}: this build reads format 1"),
-        ));
+        return Err(cx.err("format", format!("unsupported format {format}: this build reads format 1")));
     }
     root.only(TOP_KEYS)?;
 
@@ -95,36 +69,19 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
     };
     let surfaces = match root.get("shapes") {
         Some(s) => {
-            let names: HashMap<&str, u32> = materials
-                .iter()
-                .zip(0..)
-                .map(|(m, i)| (m.name.as_str(), i))
-                .collect();
-            let known = Materials {
-                by_name: &names,
-                list: &materials,
-            };
-            s.tables("[[shapes]] tables")?
-                .iter()
-                .map(|t| shape(t, &known))
-                .collect::<Result<Vec<_>>>()?
+            let names: HashMap<&str, u32> = materials.iter().zip(0..).map(|(m, i)| (m.name.as_str(), i)).collect();
+            let known = Materials { by_name: &names, list: &materials };
+            s.tables("[[shapes]] tables")?.iter().map(|t| shape(t, &known)).collect::<Result<Vec<_>>>()?
         }
         None => Vec::new(),
     };
     let lights = match root.get("lights") {
-        Some(l) => l
-            .tables("[[lights]] tables")?
-            .iter()
-            .map(light)
-            .collect::<Result<Vec<_>>>()?,
+        Some(l) => l.tables("[[lights]] tables")?.iter().map(light).collect::<Result<Vec<_>>>()?,
         None => Vec::new(),
     };
 
     if surfaces.iter().all(|s| s.triangles.is_empty()) {
-        return Err(cx.err(
-            "shapes",
-            "the scene has no surfaces: add at least one [[shapes]] entry",
-        ));
+        return Err(cx.err("shapes", "the scene has no surfaces: add at least one [[shapes]] entry"));
     }
     let glows = |c: &Rgb| c.iter().any(|&x| x > 0.0);
     let emits = lights.iter().any(|l| match l {
@@ -140,15 +97,7 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
         ));
     }
 
-    Ok(Scene {
-        source: source.to_path_buf(),
-        camera,
-        environment,
-        settings,
-        materials,
-        surfaces,
-        lights,
-    })
+    Ok(Scene { source: source.to_path_buf(), camera, environment, settings, materials, surfaces, lights })
 }
 
 /// Parses the TOML text, keeping the toml crate's line and column in the key.
@@ -188,13 +137,9 @@ fn camera(t: &Tbl) -> Result<Camera> {
         return Err(fov_item.err(format!("must be > 0 and < 180 (degrees), got {fov_y}")));
     }
     let Some(forward) = (look_at - position).try_normalize() else {
-        return Err(t.cx.err(
-            t.child("look_at"),
-            format!(
-                "must differ from camera.position, both are {}",
-                show(position)
-            ),
-        ));
+        return Err(t
+            .cx
+            .err(t.child("look_at"), format!("must differ from camera.position, both are {}", show(position))));
     };
     let Some(up_dir) = up.try_normalize() else {
         return Err(up_item.err("must not be zero"));
@@ -206,14 +151,7 @@ fn camera(t: &Tbl) -> Result<Camera> {
             show(look_at - position)
         )));
     }
-    Ok(Camera {
-        position,
-        look_at,
-        up,
-        fov_y,
-        width,
-        height,
-    })
+    Ok(Camera { position, look_at, up, fov_y, width, height })
 }
 
 fn settings(t: &Tbl) -> Result<Settings> {
@@ -265,16 +203,12 @@ fn materials(t: &Tbl) -> Result<Vec<Material>> {
                 if shininess < 0.0 {
                     return Err(shininess_item.err(format!("must be >= 0, got {shininess}")));
                 }
-                MaterialKind::Phong {
-                    diffuse,
-                    specular,
-                    shininess: shininess as f32,
-                }
+                MaterialKind::Phong { diffuse, specular, shininess: shininess as f32 }
             }
             other => {
-                return Err(kind_item.err(format!(
-                    "unknown material type \"{other}\": expected \"diffuse\" or \"phong\""
-                )));
+                return Err(
+                    kind_item.err(format!("unknown material type \"{other}\": expected \"diffuse\" or \"phong\""))
+                );
             }
         };
         let albedo = max_directional_albedo(&kind);
@@ -289,10 +223,7 @@ fn materials(t: &Tbl) -> Result<Vec<Material>> {
                 ),
             ));
         }
-        out.push(Material {
-            name: name.clone(),
-            kind,
-        });
+        out.push(Material { name: name.clone(), kind });
     }
     Ok(out)
 }
@@ -310,10 +241,7 @@ impl Materials<'_> {
                 format!("unknown material \"{name}\": the scene defines no [materials]")
             } else {
                 let names: Vec<&str> = self.list.iter().map(|m| m.name.as_str()).collect();
-                format!(
-                    "unknown material \"{name}\": [materials] defines {}",
-                    names.join(", ")
-                )
+                format!("unknown material \"{name}\": [materials] defines {}", names.join(", "))
             }
         })
     }
@@ -328,18 +256,15 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
         "box" => &["min", "max", "transform"],
         "sierpinski" => &["center", "size", "level", "transform"],
         other => {
-            return Err(type_item.err(format!(
-                "unknown shape type \"{other}\": expected {SHAPE_TYPES}"
-            )));
+            return Err(type_item.err(format!("unknown shape type \"{other}\": expected {SHAPE_TYPES}")));
         }
     };
     let mut allowed = vec!["type", "material", "emission", "two_sided"];
     allowed.extend_from_slice(specific);
     if t.table.contains_key("transform") && !allowed.contains(&"transform") {
-        return Err(t.cx.err(
-            t.child("transform"),
-            format!("a {kind} takes no transform (only mesh, box and sierpinski do)"),
-        ));
+        return Err(t
+            .cx
+            .err(t.child("transform"), format!("a {kind} takes no transform (only mesh, box and sierpinski do)")));
     }
     t.only(&allowed)?;
 
@@ -350,9 +275,7 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
         }
         None if kind == "mesh" => None,
         None => {
-            return Err(t
-                .cx
-                .err(t.child("material"), "required: a [materials] name"));
+            return Err(t.cx.err(t.child("material"), "required: a [materials] name"));
         }
     };
     let emission = t.get("emission").map_or(Ok([0.0; 3]), |e| e.rgb())?;
@@ -363,12 +286,7 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
     };
     // Every kind but mesh has its `material` (required above): `unwrap_or(0)` below never
     // falls back.
-    let with = |m: u32| {
-        move |vertices: [DVec3; 3]| Triangle {
-            vertices,
-            material: m,
-        }
-    };
+    let with = |m: u32| move |vertices: [DVec3; 3]| Triangle { vertices, material: m };
 
     let (origin, triangles) = match kind {
         "quad" | "triangle" => {
@@ -404,9 +322,7 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
         "sierpinski" => {
             let center = t.req("center", "3 numbers")?.vec3()?;
             let size = t.req("size", "a number > 0")?.positive()?;
-            let level = t
-                .req("level", "an integer from 0 to 8")?
-                .integer(0, MAX_SIERPINSKI_LEVEL.into())? as u32;
+            let level = t.req("level", "an integer from 0 to 8")?.integer(0, MAX_SIERPINSKI_LEVEL.into())? as u32;
             let m = material.unwrap_or(0);
             let triangles = shapes::sierpinski(center, size, level)
                 .into_iter()
@@ -427,21 +343,12 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
     // tiny or huge scale can make degenerate or overflow.
     if matches!(kind, "box" | "sierpinski") {
         for tri in &triangles {
-            shapes::check_polygon(&tri.vertices, POLYGON_PLANARITY).map_err(|p| {
-                t.cx.err(
-                    &t.key,
-                    format!("after its transform, a triangle of this {kind} is {p}"),
-                )
-            })?;
+            shapes::check_polygon(&tri.vertices, POLYGON_PLANARITY)
+                .map_err(|p| t.cx.err(&t.key, format!("after its transform, a triangle of this {kind} is {p}")))?;
         }
     }
 
-    Ok(Surface {
-        origin,
-        triangles,
-        emission,
-        two_sided,
-    })
+    Ok(Surface { origin, triangles, emission, two_sided })
 }
 
 /// Reads, parses and triangulates an OBJ mesh. Errors inside the file name the mesh file and
@@ -454,10 +361,7 @@ fn mesh(
     transform: &Transform,
     materials: &Materials,
 ) -> Result<Vec<Triangle>> {
-    let path =
-        t.cx.file
-            .parent()
-            .map_or_else(|| PathBuf::from(written), |dir| dir.join(written));
+    let path = t.cx.file.parent().map_or_else(|| PathBuf::from(written), |dir| dir.join(written));
     let bytes = std::fs::read(&path).map_err(|e| {
         if e.kind() == std::io::ErrorKind::NotFound {
             file_item.err(format!("mesh file {} does not exist", path.display()))
@@ -468,14 +372,9 @@ fn mesh(
     // Lossy: stray bytes in comments or names must not hide the line of a real problem.
     let text = String::from_utf8_lossy(&bytes);
     let at_line = |line: usize, message: String| {
-        Error::scene(
-            &path,
-            format!("{written} line {line}"),
-            format!("{message} (mesh of {})", t.key),
-        )
+        Error::scene(&path, format!("{written} line {line}"), format!("{message} (mesh of {})", t.key))
     };
-    let obj = shapes::parse_obj(&text, |name| materials.find(name))
-        .map_err(|e| at_line(e.line, e.message))?;
+    let obj = shapes::parse_obj(&text, |name| materials.find(name)).map_err(|e| at_line(e.line, e.message))?;
     if obj.faces.is_empty() {
         return Err(file_item.err(format!("mesh file {} has no faces", path.display())));
     }
@@ -487,20 +386,14 @@ fn mesh(
         let Some(m) = face.material.or(material) else {
             return Err(at_line(
                 face.line,
-                format!(
-                    "this face has no `usemtl` above it and {} sets no `material`",
-                    t.key
-                ),
+                format!("this face has no `usemtl` above it and {} sets no `material`", t.key),
             ));
         };
         polygon.clear();
         polygon.extend(obj.face_indices(face).iter().map(|&i| positions[i]));
         shapes::check_polygon(&polygon, POLYGON_PLANARITY)
             .map_err(|p| at_line(face.line, format!("this face is {p}")))?;
-        triangles.extend(shapes::fan(&polygon).map(|vertices| Triangle {
-            vertices,
-            material: m,
-        }));
+        triangles.extend(shapes::fan(&polygon).map(|vertices| Triangle { vertices, material: m }));
     }
     Ok(triangles)
 }
@@ -551,15 +444,9 @@ fn light(t: &Tbl) -> Result<Light> {
                 Some(s) => s.integer(1, MAX_SUBDIVISIONS)? as u32,
                 None => 1,
             };
-            Ok(Light::Area {
-                vertices,
-                radiance,
-                subdivisions,
-            })
+            Ok(Light::Area { vertices, radiance, subdivisions })
         }
-        other => Err(type_item.err(format!(
-            "unknown light type \"{other}\": expected \"point\" or \"area\""
-        ))),
+        other => Err(type_item.err(format!("unknown light type \"{other}\": expected \"point\" or \"area\""))),
     }
 }
 
@@ -591,35 +478,23 @@ struct Item<'a> {
 impl<'a> Tbl<'a> {
     fn child(&self, name: &str) -> String {
         let name = quote_key(name);
-        if self.key.is_empty() {
-            name
-        } else {
-            format!("{}.{name}", self.key)
-        }
+        if self.key.is_empty() { name } else { format!("{}.{name}", self.key) }
     }
 
     fn get(&self, name: &str) -> Option<Item<'a>> {
-        self.table.get(name).map(|value| Item {
-            cx: self.cx,
-            key: self.child(name),
-            value,
-        })
+        self.table.get(name).map(|value| Item { cx: self.cx, key: self.child(name), value })
     }
 
     fn req(&self, name: &str, expected: &str) -> Result<Item<'a>> {
-        self.get(name).ok_or_else(|| {
-            self.cx
-                .err(self.child(name), format!("required: {expected}"))
-        })
+        self.get(name).ok_or_else(|| self.cx.err(self.child(name), format!("required: {expected}")))
     }
 
     /// Refuses any key not in `allowed`, naming the allowed ones.
     fn only(&self, allowed: &[&str]) -> Result<()> {
         match self.table.keys().find(|k| !allowed.contains(&k.as_str())) {
-            Some(unknown) => Err(self.cx.err(
-                self.child(unknown),
-                format!("unknown key; allowed here: {}", allowed.join(", ")),
-            )),
+            Some(unknown) => {
+                Err(self.cx.err(self.child(unknown), format!("unknown key; allowed here: {}", allowed.join(", "))))
+            }
             None => Ok(()),
         }
     }
@@ -635,20 +510,12 @@ impl<'a> Item<'a> {
     }
 
     fn index(&self, i: usize, value: &'a Value) -> Item<'a> {
-        Item {
-            cx: self.cx,
-            key: format!("{}[{i}]", self.key),
-            value,
-        }
+        Item { cx: self.cx, key: format!("{}[{i}]", self.key), value }
     }
 
     fn table(&self) -> Result<Tbl<'a>> {
         match self.value {
-            Value::Table(table) => Ok(Tbl {
-                cx: self.cx,
-                key: self.key.clone(),
-                table,
-            }),
+            Value::Table(table) => Ok(Tbl { cx: self.cx, key: self.key.clone(), table }),
             _ => Err(self.expected("a table")),
         }
     }
@@ -658,11 +525,7 @@ impl<'a> Item<'a> {
         let Value::Array(items) = self.value else {
             return Err(self.expected(&format!("an array of {what}")));
         };
-        items
-            .iter()
-            .enumerate()
-            .map(|(i, v)| self.index(i, v).table())
-            .collect()
+        items.iter().enumerate().map(|(i, v)| self.index(i, v).table()).collect()
     }
 
     /// An array of exactly N values.
@@ -674,11 +537,7 @@ impl<'a> Item<'a> {
         if items.len() != N {
             return Err(self.err(format!("expected {what}, got {} values", items.len())));
         }
-        let items: Vec<Item<'a>> = items
-            .iter()
-            .enumerate()
-            .map(|(i, v)| self.index(i, v))
-            .collect();
+        let items: Vec<Item<'a>> = items.iter().enumerate().map(|(i, v)| self.index(i, v)).collect();
         items.try_into().map_err(|_| wrong())
     }
 
@@ -687,9 +546,7 @@ impl<'a> Item<'a> {
     }
 
     fn boolean(&self) -> Result<bool> {
-        self.value
-            .as_bool()
-            .ok_or_else(|| self.expected("true or false"))
+        self.value.as_bool().ok_or_else(|| self.expected("true or false"))
     }
 
     fn integer(&self, min: i64, max: i64) -> Result<i64> {
@@ -723,11 +580,7 @@ impl<'a> Item<'a> {
 
     fn positive(&self) -> Result<f64> {
         let x = self.number()?;
-        if x > 0.0 {
-            Ok(x)
-        } else {
-            Err(self.err(format!("must be > 0, got {x}")))
-        }
+        if x > 0.0 { Ok(x) } else { Err(self.err(format!("must be > 0, got {x}"))) }
     }
 
     fn vec3(&self) -> Result<DVec3> {
@@ -758,25 +611,14 @@ impl<'a> Item<'a> {
         if items.len() != n {
             return Err(self.err(format!("expected {what}, got {} values", items.len())));
         }
-        items
-            .iter()
-            .enumerate()
-            .map(|(i, v)| self.index(i, v).vec3())
-            .collect()
+        items.iter().enumerate().map(|(i, v)| self.index(i, v).vec3()).collect()
     }
 }
 
 /// A key as TOML would need it written: bare if it can be, quoted otherwise.
 fn quote_key(name: &str) -> String {
-    let bare = !name.is_empty()
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
-    if bare {
-        name.to_string()
-    } else {
-        format!("{name:?}")
-    }
+    let bare = !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    if bare { name.to_string() } else { format!("{name:?}") }
 }
 
 /// What a value is, for "expected X, got Y".

@@ -46,11 +46,8 @@ impl Default for Transform {
 }
 
 impl Transform {
-    pub const IDENTITY: Transform = Transform {
-        scale: DVec3::ONE,
-        rotation: DQuat::IDENTITY,
-        translation: DVec3::ZERO,
-    };
+    pub const IDENTITY: Transform =
+        Transform { scale: DVec3::ONE, rotation: DQuat::IDENTITY, translation: DVec3::ZERO };
 
     /// `rotate = [axis_x, axis_y, axis_z, degrees]`: right-handed (counter-clockwise seen from
     /// the tip of the axis) about the axis through the origin. `None` for a zero axis.
@@ -76,10 +73,7 @@ pub fn quad(v: [DVec3; 4]) -> [[DVec3; 3]; 2] {
 /// A polygon split into the fan (v0, v_i, v_i+1); right for the convex polygons that
 /// `check_polygon` lets through.
 pub fn fan(polygon: &[DVec3]) -> impl Iterator<Item = [DVec3; 3]> + '_ {
-    polygon
-        .windows(2)
-        .skip(1)
-        .map(move |w| [polygon[0], w[0], w[1]])
+    polygon.windows(2).skip(1).map(move |w| [polygon[0], w[0], w[1]])
 }
 
 /// The closed axis-aligned box [min, max]: 12 triangles facing outward.
@@ -88,16 +82,8 @@ pub fn box_triangles(min: DVec3, max: DVec3) -> Vec<[DVec3; 3]> {
         // (a, a+1, a+2) is a cyclic permutation of (x, y, z), so e_u x e_v = e_a.
         let mut p = DVec3::ZERO;
         p[a] = if at_max { max[a] } else { min[a] };
-        p[(a + 1) % 3] = if u > 0.5 {
-            max[(a + 1) % 3]
-        } else {
-            min[(a + 1) % 3]
-        };
-        p[(a + 2) % 3] = if v > 0.5 {
-            max[(a + 2) % 3]
-        } else {
-            min[(a + 2) % 3]
-        };
+        p[(a + 1) % 3] = if u > 0.5 { max[(a + 1) % 3] } else { min[(a + 1) % 3] };
+        p[(a + 2) % 3] = if v > 0.5 { max[(a + 2) % 3] } else { min[(a + 2) % 3] };
         p
     };
     let mut out = Vec::with_capacity(12);
@@ -126,17 +112,11 @@ pub fn sierpinski(center: DVec3, size: f64, level: u32) -> Vec<[DVec3; 3]> {
     let apex = center + DVec3::new(0.0, 0.75 * h, 0.0);
     let mut tetrahedra = vec![[apex, base(0.0), base(1.0), base(2.0)]];
     for _ in 0..level.min(MAX_SIERPINSKI_LEVEL) {
-        tetrahedra = tetrahedra
-            .iter()
-            .flat_map(|t| (0..4).map(move |c| t.map(|q| (t[c] + q) * 0.5)))
-            .collect();
+        tetrahedra = tetrahedra.iter().flat_map(|t| (0..4).map(move |c| t.map(|q| (t[c] + q) * 0.5))).collect();
     }
     // (b0, b1, b2) faces down, away from the apex (checked by the tests); the other three
     // faces follow from the tetrahedron's orientation.
-    tetrahedra
-        .iter()
-        .flat_map(|&[a, b0, b1, b2]| [[a, b1, b0], [a, b0, b2], [a, b2, b1], [b0, b1, b2]])
-        .collect()
+    tetrahedra.iter().flat_map(|&[a, b0, b1, b2]| [[a, b1, b0], [a, b0, b2], [a, b2, b1], [b0, b1, b2]]).collect()
 }
 
 /// Twice the triangle's area.
@@ -170,23 +150,14 @@ impl fmt::Display for PolygonProblem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
             PolygonProblem::TooFew(n) => write!(f, "a polygon needs at least 3 vertices, got {n}"),
-            PolygonProblem::OutOfRange { vertex } => write!(
-                f,
-                "vertex {vertex} is out of range (beyond {MAX_COORDINATE:e}, the f32 range the GPU works in)"
-            ),
-            PolygonProblem::ZeroArea {
-                vertices: [a, b, c],
-            } => write!(
+            PolygonProblem::OutOfRange { vertex } => {
+                write!(f, "vertex {vertex} is out of range (beyond {MAX_COORDINATE:e}, the f32 range the GPU works in)")
+            }
+            PolygonProblem::ZeroArea { vertices: [a, b, c] } => write!(
                 f,
                 "degenerate: the triangle of vertices {a}, {b}, {c} has zero area (they coincide or lie on one line)"
             ),
-            PolygonProblem::NotPlanar {
-                vertex,
-                plane: [a, b, c],
-                distance,
-                size,
-                tolerance,
-            } => write!(
+            PolygonProblem::NotPlanar { vertex, plane: [a, b, c], distance, size, tolerance } => write!(
                 f,
                 "not planar: vertex {vertex} lies {distance:.4e} from the plane of vertices {a}, {b}, {c}, more than {tolerance:e} of its size {size:.4e} (the diagonal of its bounding box)"
             ),
@@ -207,15 +178,10 @@ pub fn check_polygon(p: &[DVec3], planarity: f64) -> Result<(), PolygonProblem> 
     if n < 3 {
         return Err(PolygonProblem::TooFew(n));
     }
-    if let Some(vertex) = p
-        .iter()
-        .position(|v| !v.is_finite() || v.abs().max_element() > MAX_COORDINATE)
-    {
+    if let Some(vertex) = p.iter().position(|v| !v.is_finite() || v.abs().max_element() > MAX_COORDINATE) {
         return Err(PolygonProblem::OutOfRange { vertex });
     }
-    let (lo, hi) = p
-        .iter()
-        .fold((p[0], p[0]), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let (lo, hi) = p.iter().fold((p[0], p[0]), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     let size = (hi - lo).length();
     // Coordinates near f32::MAX overflow f64 squares; such a polygon is out of range.
     if !size.is_finite() || !(size * size).is_finite() {
@@ -226,9 +192,7 @@ pub fn check_polygon(p: &[DVec3], planarity: f64) -> Result<(), PolygonProblem> 
     for i in 1..n - 1 {
         let area = double_area(p[0], p[i], p[i + 1]);
         if area.is_nan() || area <= min_double_area {
-            return Err(PolygonProblem::ZeroArea {
-                vertices: [0, i, i + 1],
-            });
+            return Err(PolygonProblem::ZeroArea { vertices: [0, i, i + 1] });
         }
         if area > largest.0 {
             largest = (area, i);
@@ -240,9 +204,7 @@ pub fn check_polygon(p: &[DVec3], planarity: f64) -> Result<(), PolygonProblem> 
 
     // Newell's normal: the polygon's area vector, well defined even when slightly warped.
     let centroid = p.iter().sum::<DVec3>() / n as f64;
-    let area_vector: DVec3 = (0..n)
-        .map(|i| (p[i] - centroid).cross(p[(i + 1) % n] - centroid))
-        .sum();
+    let area_vector: DVec3 = (0..n).map(|i| (p[i] - centroid).cross(p[(i + 1) % n] - centroid)).sum();
     // Its fan triangles have area, so a polygon with no net area crosses itself (a bow tie).
     let Some(normal) = area_vector.try_normalize() else {
         return Err(PolygonProblem::NotConvex { vertex: 0 });
@@ -256,13 +218,7 @@ pub fn check_polygon(p: &[DVec3], planarity: f64) -> Result<(), PolygonProblem> 
     for (vertex, &v) in p.iter().enumerate() {
         let distance = (v - p[0]).dot(plane_normal).abs();
         if distance > planarity * size {
-            return Err(PolygonProblem::NotPlanar {
-                vertex,
-                plane,
-                distance,
-                size,
-                tolerance: planarity,
-            });
+            return Err(PolygonProblem::NotPlanar { vertex, plane, distance, size, tolerance: planarity });
         }
     }
 
@@ -323,10 +279,7 @@ pub struct ObjError {
 /// `o`, `g`, `s`, `mtllib`, ...) are ignored. Face vertices may be written `v`, `v/vt`,
 /// `v//vn` or `v/vt/vn`, with 1-based or negative (relative) indices. `material` resolves a
 /// `usemtl` name, or says why it cannot.
-pub fn parse_obj(
-    text: &str,
-    mut material: impl FnMut(&str) -> Result<u32, String>,
-) -> Result<Obj, ObjError> {
+pub fn parse_obj(text: &str, mut material: impl FnMut(&str) -> Result<u32, String>) -> Result<Obj, ObjError> {
     let mut obj = Obj::default();
     let mut current = None;
     for (index, raw) in text.lines().enumerate() {
@@ -339,9 +292,7 @@ pub fn parse_obj(
                 let mut xyz = [0.0; 3];
                 for (k, slot) in xyz.iter_mut().enumerate() {
                     let Some(token) = tokens.next() else {
-                        return Err(err(format!(
-                            "expected 3 numbers after `v` (x y z), got {k}"
-                        )));
+                        return Err(err(format!("expected 3 numbers after `v` (x y z), got {k}")));
                     };
                     *slot = obj_number(token).map_err(err)?;
                 }
@@ -355,23 +306,12 @@ pub fn parse_obj(
                 }
                 let count = obj.indices.len() - first;
                 if count < 3 {
-                    return Err(err(format!(
-                        "a face needs at least 3 vertices, got {count}"
-                    )));
+                    return Err(err(format!("a face needs at least 3 vertices, got {count}")));
                 }
-                obj.faces.push(ObjFace {
-                    line,
-                    material: current,
-                    first,
-                    count,
-                });
+                obj.faces.push(ObjFace { line, material: current, first, count });
             }
             Some("usemtl") => {
-                let name = content
-                    .trim_start()
-                    .strip_prefix("usemtl")
-                    .unwrap_or("")
-                    .trim();
+                let name = content.trim_start().strip_prefix("usemtl").unwrap_or("").trim();
                 if name.is_empty() {
                     return Err(err("expected a material name after `usemtl`".into()));
                 }
@@ -386,10 +326,7 @@ pub fn parse_obj(
         if let Some(&bad) = obj.face_indices(face).iter().find(|&&i| i >= defined) {
             return Err(ObjError {
                 line: face.line,
-                message: format!(
-                    "vertex {} does not exist (the file defines {defined})",
-                    bad + 1
-                ),
+                message: format!("vertex {} does not exist (the file defines {defined})", bad + 1),
             });
         }
     }
@@ -397,13 +334,9 @@ pub fn parse_obj(
 }
 
 fn obj_number(token: &str) -> Result<f64, String> {
-    let x: f64 = token
-        .parse()
-        .map_err(|_| format!("expected a number, got `{token}`"))?;
+    let x: f64 = token.parse().map_err(|_| format!("expected a number, got `{token}`"))?;
     if !x.is_finite() || x.abs() > MAX_COORDINATE {
-        return Err(format!(
-            "expected a finite number within ±{MAX_COORDINATE:e}, got `{token}`"
-        ));
+        return Err(format!("expected a finite number within ±{MAX_COORDINATE:e}, got `{token}`"));
     }
     Ok(x)
 }
@@ -411,18 +344,14 @@ fn obj_number(token: &str) -> Result<f64, String> {
 /// One face vertex `v[/vt][/vn]` -> 0-based position index. `defined` positions precede it.
 fn obj_index(token: &str, defined: usize) -> Result<usize, String> {
     let v = token.split('/').next().unwrap_or("");
-    let i: i64 = v.parse().map_err(|_| {
-        format!("expected a vertex index (v, v/vt, v//vn or v/vt/vn), got `{token}`")
-    })?;
+    let i: i64 =
+        v.parse().map_err(|_| format!("expected a vertex index (v, v/vt, v//vn or v/vt/vn), got `{token}`"))?;
     match i {
         0 => Err("vertex index 0 (OBJ indices start at 1; negative ones count back)".into()),
         i if i > 0 => usize::try_from(i - 1).map_err(|_| format!("vertex index {i} is too large")),
-        i => usize::try_from(i.unsigned_abs())
-            .ok()
-            .and_then(|back| defined.checked_sub(back))
-            .ok_or_else(|| {
-                format!("relative vertex index {i} reaches before the first vertex ({defined} defined so far)")
-            }),
+        i => usize::try_from(i.unsigned_abs()).ok().and_then(|back| defined.checked_sub(back)).ok_or_else(|| {
+            format!("relative vertex index {i} reaches before the first vertex ({defined} defined so far)")
+        }),
     }
 }
 
@@ -444,9 +373,7 @@ mod tests {
 
     /// Divergence theorem: the volume a closed, outward-facing surface encloses.
     fn volume(ts: &[[DVec3; 3]]) -> f64 {
-        ts.iter()
-            .map(|t| ((t[0] + t[1] + t[2]) / 3.0).dot(cross(t)) / 6.0)
-            .sum()
+        ts.iter().map(|t| ((t[0] + t[1] + t[2]) / 3.0).dot(cross(t)) / 6.0).sum()
     }
 
     #[test]
@@ -470,14 +397,8 @@ mod tests {
         let middle = (min + max) / 2.0;
         for t in &ts {
             let n = cross(t).normalize();
-            assert!(
-                (n.abs().max_element() - 1.0).abs() < EPS,
-                "not axis-aligned: {n}"
-            );
-            assert!(
-                n.dot((t[0] + t[1] + t[2]) / 3.0 - middle) > 0.0,
-                "inward: {t:?}"
-            );
+            assert!((n.abs().max_element() - 1.0).abs() < EPS, "not axis-aligned: {n}");
+            assert!(n.dot((t[0] + t[1] + t[2]) / 3.0 - middle) > 0.0, "inward: {t:?}");
             assert!(check_polygon(t, POLYGON_PLANARITY).is_ok());
         }
     }
@@ -496,10 +417,7 @@ mod tests {
             }
         }
         let corners: DVec3 = ts[3].iter().sum::<DVec3>() + apex;
-        assert!(
-            corners.distance(4.0 * center) < EPS,
-            "centroid is not center"
-        );
+        assert!(corners.distance(4.0 * center) < EPS, "centroid is not center");
         // The base faces down.
         assert!(cross(&ts[3]).normalize().distance(DVec3::NEG_Y) < EPS);
     }
@@ -541,10 +459,7 @@ mod tests {
         assert!(t.apply(DVec3::Y).distance(DVec3::new(-2.0, 0.0, 0.0)) < EPS);
         assert!(Transform::rotation(DVec3::ZERO, 10.0).is_none());
         // A positive scale keeps winding: the transformed box still encloses +volume.
-        let ts: Vec<_> = box_triangles(DVec3::ZERO, DVec3::ONE)
-            .into_iter()
-            .map(|tri| t.apply_triangle(tri))
-            .collect();
+        let ts: Vec<_> = box_triangles(DVec3::ZERO, DVec3::ONE).into_iter().map(|tri| t.apply_triangle(tri)).collect();
         assert!((volume(&ts) - 6.0).abs() < EPS);
     }
 
@@ -576,68 +491,34 @@ mod tests {
             DVec3::new(556.0, 548.8, 0.0),
         ];
         assert_eq!(check_polygon(&wall, POLYGON_PLANARITY), Ok(()));
-        assert!(matches!(
-            check_polygon(&wall, LIGHT_PLANARITY),
-            Err(PolygonProblem::NotPlanar { .. })
-        ));
+        assert!(matches!(check_polygon(&wall, LIGHT_PLANARITY), Err(PolygonProblem::NotPlanar { .. })));
     }
 
     #[test]
     fn bad_polygons_are_named() {
         let mut bow_tie = square();
         bow_tie.swap(2, 3);
-        assert!(matches!(
-            check_polygon(&bow_tie, POLYGON_PLANARITY),
-            Err(PolygonProblem::NotConvex { .. })
-        ));
+        assert!(matches!(check_polygon(&bow_tie, POLYGON_PLANARITY), Err(PolygonProblem::NotConvex { .. })));
         let pentagram: Vec<DVec3> = (0..5)
             .map(|k| {
                 let t = TAU * (2 * k) as f64 / 5.0;
                 DVec3::new(t.cos(), t.sin(), 0.0)
             })
             .collect();
-        assert!(matches!(
-            check_polygon(&pentagram, POLYGON_PLANARITY),
-            Err(PolygonProblem::NotConvex { .. })
-        ));
-        let arrow = [
-            DVec3::ZERO,
-            DVec3::new(2.0, 0.0, 0.0),
-            DVec3::new(1.0, 0.5, 0.0),
-            DVec3::new(1.0, 2.0, 0.0),
-        ];
-        assert!(matches!(
-            check_polygon(&arrow, POLYGON_PLANARITY),
-            Err(PolygonProblem::NotConvex { vertex: 2 })
-        ));
+        assert!(matches!(check_polygon(&pentagram, POLYGON_PLANARITY), Err(PolygonProblem::NotConvex { .. })));
+        let arrow = [DVec3::ZERO, DVec3::new(2.0, 0.0, 0.0), DVec3::new(1.0, 0.5, 0.0), DVec3::new(1.0, 2.0, 0.0)];
+        assert!(matches!(check_polygon(&arrow, POLYGON_PLANARITY), Err(PolygonProblem::NotConvex { vertex: 2 })));
         let mut warped = square();
         warped[2].z = 0.5;
-        assert!(matches!(
-            check_polygon(&warped, POLYGON_PLANARITY),
-            Err(PolygonProblem::NotPlanar { .. })
-        ));
+        assert!(matches!(check_polygon(&warped, POLYGON_PLANARITY), Err(PolygonProblem::NotPlanar { .. })));
         let mut repeated = square();
         repeated[3] = repeated[2];
-        assert_eq!(
-            check_polygon(&repeated, POLYGON_PLANARITY),
-            Err(PolygonProblem::ZeroArea {
-                vertices: [0, 2, 3]
-            })
-        );
+        assert_eq!(check_polygon(&repeated, POLYGON_PLANARITY), Err(PolygonProblem::ZeroArea { vertices: [0, 2, 3] }));
         let line = [DVec3::ZERO, DVec3::X, DVec3::new(2.0, 0.0, 0.0)];
-        assert!(matches!(
-            check_polygon(&line, POLYGON_PLANARITY),
-            Err(PolygonProblem::ZeroArea { .. })
-        ));
-        assert_eq!(
-            check_polygon(&square()[..2], POLYGON_PLANARITY),
-            Err(PolygonProblem::TooFew(2))
-        );
+        assert!(matches!(check_polygon(&line, POLYGON_PLANARITY), Err(PolygonProblem::ZeroArea { .. })));
+        assert_eq!(check_polygon(&square()[..2], POLYGON_PLANARITY), Err(PolygonProblem::TooFew(2)));
         let far = [DVec3::ZERO, DVec3::X, DVec3::new(0.0, 1e39, 0.0)];
-        assert_eq!(
-            check_polygon(&far, POLYGON_PLANARITY),
-            Err(PolygonProblem::OutOfRange { vertex: 2 })
-        );
+        assert_eq!(check_polygon(&far, POLYGON_PLANARITY), Err(PolygonProblem::OutOfRange { vertex: 2 }));
     }
 
     fn materials(name: &str) -> Result<u32, String> {
@@ -699,11 +580,7 @@ f 1//1 -1//1 5//1
             ("v 0 0 0\nv 1 0 0\nf 1 2\n", 3, "at least 3 vertices"),
             ("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 0 1 2\n", 4, "index 0"),
             ("v 0 0 0\nf 1 2 3\nv 1 0 0\n", 2, "vertex 3 does not exist"),
-            (
-                "v 0 0 0\nv 1 0 0\nf -1 -2 -3\n",
-                3,
-                "before the first vertex",
-            ),
+            ("v 0 0 0\nv 1 0 0\nf -1 -2 -3\n", 3, "before the first vertex"),
             ("v 0 0 0\nf 1 x 1\n", 2, "expected a vertex index"),
             ("f 1 2 99999999999999999999\n", 1, "expected a vertex index"),
             ("usemtl\n", 1, "material name"),

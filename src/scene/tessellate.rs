@@ -85,11 +85,7 @@ pub struct PatchStats {
 
 impl Patches {
     pub fn stats(&self) -> PatchStats {
-        let light_patches = self
-            .patches
-            .iter()
-            .filter(|p| matches!(p.kind, PatchKind::AreaLight { .. }))
-            .count();
+        let light_patches = self.patches.iter().filter(|p| matches!(p.kind, PatchKind::AreaLight { .. })).count();
         PatchStats {
             surface_patches: self.patches.len() - light_patches,
             light_patches,
@@ -108,9 +104,7 @@ impl Patches {
 /// `MAX_PATCHES` patches (counted before anything is allocated), are refused.
 pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
     if patch_size.is_nan() || patch_size <= 0.0 {
-        return Err(Error::Usage(format!(
-            "patch size must be a number > 0, got {patch_size}"
-        )));
+        return Err(Error::Usage(format!("patch size must be a number > 0, got {patch_size}")));
     }
 
     let (mut count, mut light_count) = (0u64, 0u64);
@@ -142,11 +136,7 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
     }
     let count = count.saturating_add(light_count);
     if count > MAX_PATCHES {
-        let shown = if count == u64::MAX {
-            "more than 10^19".to_string()
-        } else {
-            count.to_string()
-        };
+        let shown = if count == u64::MAX { "more than 10^19".to_string() } else { count.to_string() };
         return Err(Error::Usage(format!(
             "patch size {patch_size} would make {shown} patches, more than the limit of \
              {MAX_PATCHES}; choose a larger --patch-size"
@@ -161,10 +151,7 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
         })
         .sum();
 
-    let mut out = Patches {
-        patches: Vec::with_capacity(count as usize),
-        samples: Vec::with_capacity(sample_count),
-    };
+    let mut out = Patches { patches: Vec::with_capacity(count as usize), samples: Vec::with_capacity(sample_count) };
     for (s, surface) in scene.surfaces.iter().enumerate() {
         for (t, triangle) in surface.triangles.iter().enumerate() {
             let source = SourceTriangle::new(scene, s, t, triangle)?;
@@ -182,18 +169,12 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
     }
     for (l, light) in scene.lights.iter().enumerate() {
         match *light {
-            Light::Point { position, power } => out.samples.push(LightSample {
-                position,
-                normal: None,
-                strength: power,
-                weight: 1.0,
-                light: l as u32,
-            }),
-            Light::Area {
-                vertices,
-                radiance,
-                subdivisions,
-            } => mesh_area_light(scene, l, vertices, radiance, subdivisions, &mut out)?,
+            Light::Point { position, power } => {
+                out.samples.push(LightSample { position, normal: None, strength: power, weight: 1.0, light: l as u32 })
+            }
+            Light::Area { vertices, radiance, subdivisions } => {
+                mesh_area_light(scene, l, vertices, radiance, subdivisions, &mut out)?
+            }
         }
     }
     Ok(out)
@@ -202,17 +183,9 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
 /// The bounding sphere of every patch vertex and light sample: the centre of their
 /// axis-aligned box and the distance from it to the farthest point. `(0, 0)` when empty.
 pub fn scene_bounds(patches: &Patches) -> (DVec3, f64) {
-    let points = || {
-        patches
-            .patches
-            .iter()
-            .flat_map(|p| p.vertices)
-            .chain(patches.samples.iter().map(|s| s.position))
-    };
-    let (lo, hi) = points().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), p| (lo.min(p), hi.max(p)),
-    );
+    let points = || patches.patches.iter().flat_map(|p| p.vertices).chain(patches.samples.iter().map(|s| s.position));
+    let (lo, hi) = points()
+        .fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(p), hi.max(p)));
     if lo.x > hi.x {
         return (DVec3::ZERO, 0.0);
     }
@@ -234,10 +207,7 @@ impl SourceTriangle {
         let [v0, v1, v2] = triangle.vertices;
         let cross = (v1 - v0).cross(v2 - v0);
         let area = 0.5 * cross.length();
-        let longest_edge = (v1 - v0)
-            .length()
-            .max((v2 - v1).length())
-            .max((v0 - v2).length());
+        let longest_edge = (v1 - v0).length().max((v2 - v1).length()).max((v0 - v2).length());
         // The loader refuses these; a scene built in code must not reach the GPU with them.
         if !(area > 0.0 && area.is_finite() && longest_edge.is_finite()) {
             let origin = &scene.surfaces[s].origin;
@@ -247,12 +217,7 @@ impl SourceTriangle {
                 format!("degenerate or non-finite triangle {:?}", triangle.vertices),
             ));
         }
-        Ok(SourceTriangle {
-            vertices: triangle.vertices,
-            normal: cross.normalize(),
-            area,
-            longest_edge,
-        })
+        Ok(SourceTriangle { vertices: triangle.vertices, normal: cross.normalize(), area, longest_edge })
     }
 
     /// k: the number of pieces each edge is cut into. Saturates instead of overflowing, so
@@ -281,20 +246,11 @@ impl SourceTriangle {
         let at = |i: u64, j: u64| v0 + e1 * (i as f64 / kf) + e2 * (j as f64 / kf);
         let area = self.area / (kf * kf);
         let mut push = |vertices: [DVec3; 3]| {
-            let patch = Patch {
-                vertices,
-                normal: self.normal,
-                area,
-                ..*base
-            };
+            let patch = Patch { vertices, normal: self.normal, area, ..*base };
             out.push(patch);
             if base.twin {
                 let [a, b, c] = vertices;
-                out.push(Patch {
-                    vertices: [a, c, b],
-                    normal: -self.normal,
-                    ..patch
-                });
+                out.push(Patch { vertices: [a, c, b], normal: -self.normal, ..patch });
             }
         };
         if k == 1 {
@@ -350,12 +306,7 @@ fn mesh_area_light(
     }
     for j in 0..n {
         for i in 0..n {
-            let corners = [
-                j * row + i,
-                j * row + i + 1,
-                (j + 1) * row + i + 1,
-                (j + 1) * row + i,
-            ];
+            let corners = [j * row + i, j * row + i + 1, (j + 1) * row + i + 1, (j + 1) * row + i];
             for [a, b, c] in [[0, 1, 2], [0, 2, 3]] {
                 let ids = [corners[a], corners[b], corners[c]];
                 let vertices = ids.map(|id| out.samples[first_sample + id].position);
@@ -411,10 +362,7 @@ pub(crate) mod tests {
             },
             environment: [0.0; 3],
             settings: Settings::default(),
-            materials: vec![Material {
-                name: "white".into(),
-                kind: MaterialKind::Diffuse { albedo: [0.5; 3] },
-            }],
+            materials: vec![Material { name: "white".into(), kind: MaterialKind::Diffuse { albedo: [0.5; 3] } }],
             surfaces,
             lights,
         }
@@ -423,13 +371,7 @@ pub(crate) mod tests {
     pub(crate) fn surface(triangles: &[[DVec3; 3]], two_sided: bool) -> Surface {
         Surface {
             origin: "shapes[0] (test)".into(),
-            triangles: triangles
-                .iter()
-                .map(|&vertices| Triangle {
-                    vertices,
-                    material: 0,
-                })
-                .collect(),
+            triangles: triangles.iter().map(|&vertices| Triangle { vertices, material: 0 }).collect(),
             emission: [0.25, 0.5, 1.0],
             two_sided,
         }
@@ -442,18 +384,12 @@ pub(crate) mod tests {
     /// Triangles of every shape: slivers, obtuse, large and far from the origin.
     fn random_triangles(seed: u64, count: usize) -> Vec<[DVec3; 3]> {
         let mut rng = Pcg64::seed_from_u64(seed);
-        let mut point = |scale: f64| {
-            DVec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) * scale
-        };
+        let mut point = |scale: f64| DVec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) * scale;
         (0..count)
             .map(|t| {
                 let offset = point(100.0);
                 let scale = [0.3, 1.0, 7.0][t % 3];
-                [
-                    offset + point(scale),
-                    offset + point(scale),
-                    offset + point(scale),
-                ]
+                [offset + point(scale), offset + point(scale), offset + point(scale)]
             })
             .collect()
     }
@@ -492,36 +428,23 @@ pub(crate) mod tests {
             for p in &patches.patches {
                 assert!(longest_edge(p.vertices) <= patch_size * (1.0 + ROUNDING));
                 let area = triangle_area(p.vertices);
-                assert!(
-                    (area - p.area).abs() <= 1e-9 * p.area,
-                    "{area} vs {}",
-                    p.area
-                );
+                assert!((area - p.area).abs() <= 1e-9 * p.area, "{area} vs {}", p.area);
             }
             // k is the least that works, so no more patches than ceil(longest / size)^2.
-            let expected: usize = triangles
-                .iter()
-                .map(|&t| ((longest_edge(t) / patch_size).ceil().max(1.0) as usize).pow(2))
-                .sum();
+            let expected: usize =
+                triangles.iter().map(|&t| ((longest_edge(t) / patch_size).ceil().max(1.0) as usize).pow(2)).sum();
             assert_eq!(patches.patches.len(), expected);
         }
     }
 
     #[test]
     fn an_edge_that_is_a_multiple_of_the_patch_size_is_cut_exactly() {
-        let right = [
-            DVec3::ZERO,
-            DVec3::new(3.0, 0.0, 0.0),
-            DVec3::new(0.0, 3.0, 0.0),
-        ];
+        let right = [DVec3::ZERO, DVec3::new(3.0, 0.0, 0.0), DVec3::new(0.0, 3.0, 0.0)];
         let scene = scene_of(vec![surface(&[right], false)], vec![]);
         // Hypotenuse 3 sqrt(2): k = 5 at size 3 sqrt(2) / 5, 1 at its own length.
         let hypotenuse = 3.0 * 2f64.sqrt();
         assert_eq!(tessellate(&scene, hypotenuse).unwrap().patches.len(), 1);
-        assert_eq!(
-            tessellate(&scene, hypotenuse / 5.0).unwrap().patches.len(),
-            25
-        );
+        assert_eq!(tessellate(&scene, hypotenuse / 5.0).unwrap().patches.len(), 25);
         assert_eq!(tessellate(&scene, f64::INFINITY).unwrap().patches.len(), 1);
     }
 
@@ -564,10 +487,7 @@ pub(crate) mod tests {
             assert_eq!(b.normal, -a.normal);
             let [w0, w1, w2] = b.vertices;
             assert!((w1 - w0).cross(w2 - w0).normalize().dot(b.normal) > 1.0 - 1e-9);
-            assert_eq!(
-                (b.area, b.material, b.emission),
-                (a.area, a.material, a.emission)
-            );
+            assert_eq!((b.area, b.material, b.emission), (a.area, a.material, a.emission));
         }
     }
 
@@ -607,14 +527,8 @@ pub(crate) mod tests {
                 assert_eq!(p.emission, [10.0, 20.0, 30.0]);
                 assert_eq!(p.kind, PatchKind::AreaLight { light: 0 });
                 assert!(!p.twin);
-                let corners = p
-                    .vertices
-                    .map(|v| patches.samples.iter().filter(|s| s.position == v).count());
-                assert_eq!(
-                    corners,
-                    [1, 1, 1],
-                    "patch vertices are the sample positions"
-                );
+                let corners = p.vertices.map(|v| patches.samples.iter().filter(|s| s.position == v).count());
+                assert_eq!(corners, [1, 1, 1], "patch vertices are the sample positions");
             }
         }
     }
@@ -623,13 +537,7 @@ pub(crate) mod tests {
     fn one_cell_light_is_the_quads_own_two_triangles() {
         let scene = scene_of(vec![], vec![square_light(1.0, 1)]);
         let patches = tessellate(&scene, 0.1).unwrap();
-        let Light::Area {
-            vertices: [v0, v1, v2, v3],
-            ..
-        } = scene.lights[0]
-        else {
-            unreachable!()
-        };
+        let Light::Area { vertices: [v0, v1, v2, v3], .. } = scene.lights[0] else { unreachable!() };
         assert_eq!(patches.patches[0].vertices, [v0, v1, v2]);
         assert_eq!(patches.patches[1].vertices, [v0, v2, v3]);
     }
@@ -645,20 +553,13 @@ pub(crate) mod tests {
         let area = triangle_area([v0, v1, v2]) + triangle_area([v0, v2, v3]);
         let normal = e1.cross(e2).normalize();
         for n in [1u32, 3, 4] {
-            let light = Light::Area {
-                vertices,
-                radiance: [1.0; 3],
-                subdivisions: n,
-            };
+            let light = Light::Area { vertices, radiance: [1.0; 3], subdivisions: n };
             let patches = tessellate(&scene_of(vec![], vec![light]), 1.0).unwrap();
             assert_eq!(patches.patches.len(), 2 * (n * n) as usize);
             assert_eq!(patches.samples.len(), ((n + 1) * (n + 1)) as usize);
             let weights: f64 = patches.samples.iter().map(|s| s.weight).sum();
             let patch_area: f64 = patches.patches.iter().map(|p| p.area).sum();
-            assert!(
-                (weights - area).abs() <= ROUNDING * area,
-                "{weights} vs {area}"
-            );
+            assert!((weights - area).abs() <= ROUNDING * area, "{weights} vs {area}");
             assert!((patch_area - area).abs() <= ROUNDING * area);
             for s in &patches.samples {
                 assert!(s.normal.unwrap().dot(normal) > 1.0 - 1e-12);
@@ -673,12 +574,8 @@ pub(crate) mod tests {
 
     #[test]
     fn point_light_is_one_sample() {
-        let light = Light::Point {
-            position: DVec3::new(1.0, 2.0, 3.0),
-            power: [5.0, 6.0, 7.0],
-        };
-        let patches =
-            tessellate(&scene_of(vec![], vec![square_light(1.0, 2), light]), 1.0).unwrap();
+        let light = Light::Point { position: DVec3::new(1.0, 2.0, 3.0), power: [5.0, 6.0, 7.0] };
+        let patches = tessellate(&scene_of(vec![], vec![square_light(1.0, 2), light]), 1.0).unwrap();
         assert_eq!(patches.samples.len(), 10);
         let sample = patches.samples[9];
         assert_eq!(
@@ -731,20 +628,9 @@ pub(crate) mod tests {
 
     #[test]
     fn bounds_enclose_patches_and_samples() {
-        let cube_corner = [
-            DVec3::ZERO,
-            DVec3::new(2.0, 0.0, 0.0),
-            DVec3::new(0.0, 2.0, 0.0),
-        ];
-        let light = Light::Point {
-            position: DVec3::new(0.0, 0.0, 2.0),
-            power: [1.0; 3],
-        };
-        let patches = tessellate(
-            &scene_of(vec![surface(&[cube_corner], false)], vec![light]),
-            0.5,
-        )
-        .unwrap();
+        let cube_corner = [DVec3::ZERO, DVec3::new(2.0, 0.0, 0.0), DVec3::new(0.0, 2.0, 0.0)];
+        let light = Light::Point { position: DVec3::new(0.0, 0.0, 2.0), power: [1.0; 3] };
+        let patches = tessellate(&scene_of(vec![surface(&[cube_corner], false)], vec![light]), 0.5).unwrap();
         let (center, radius) = scene_bounds(&patches);
         assert!((center - DVec3::ONE).length() <= ROUNDING);
         assert!((radius - 3f64.sqrt()).abs() <= ROUNDING);
@@ -759,17 +645,9 @@ pub(crate) mod tests {
             let angle = 2.0 * std::f64::consts::PI * k / 3.0;
             center + DVec3::new(r * angle.sin(), -h / 4.0, -r * angle.cos())
         };
-        let mut tetrahedra = vec![[
-            center + DVec3::new(0.0, 0.75 * h, 0.0),
-            base(0.0),
-            base(1.0),
-            base(2.0),
-        ]];
+        let mut tetrahedra = vec![[center + DVec3::new(0.0, 0.75 * h, 0.0), base(0.0), base(1.0), base(2.0)]];
         for _ in 0..level {
-            tetrahedra = tetrahedra
-                .iter()
-                .flat_map(|t| (0..4).map(move |c| t.map(|v| 0.5 * (v + t[c]))))
-                .collect();
+            tetrahedra = tetrahedra.iter().flat_map(|t| (0..4).map(move |c| t.map(|v| 0.5 * (v + t[c])))).collect();
         }
         let mut triangles = Vec::with_capacity(4 * tetrahedra.len());
         for t in &tetrahedra {
@@ -815,25 +693,15 @@ pub(crate) mod tests {
             surfaces.push(surface(&triangles, two_sided));
         }
         let mut lights = Vec::new();
-        for light in table
-            .get("lights")
-            .and_then(|l| l.as_array())
-            .into_iter()
-            .flatten()
-        {
+        for light in table.get("lights").and_then(|l| l.as_array()).into_iter().flatten() {
             lights.push(match light["type"].as_str().unwrap() {
-                "point" => Light::Point {
-                    position: point(&light["position"]),
-                    power: colour(&light["power"]),
-                },
+                "point" => Light::Point { position: point(&light["position"]), power: colour(&light["power"]) },
                 _ => {
                     let v = points(&light["vertices"]);
                     Light::Area {
                         vertices: [v[0], v[1], v[2], v[3]],
                         radiance: colour(&light["radiance"]),
-                        subdivisions: light
-                            .get("subdivisions")
-                            .map_or(1, |n| n.as_integer().unwrap() as u32),
+                        subdivisions: light.get("subdivisions").map_or(1, |n| n.as_integer().unwrap() as u32),
                     }
                 }
             });
@@ -851,32 +719,17 @@ pub(crate) mod tests {
         let elapsed = start.elapsed();
         let stats = patches.stats();
         println!("{stats:?} in {elapsed:?}");
-        assert!(
-            (20_000..=25_000).contains(&patches.patches.len()),
-            "{stats:?}"
-        );
+        assert!((20_000..=25_000).contains(&patches.patches.len()), "{stats:?}");
         assert_eq!(stats.light_patches, 8);
         assert_eq!(stats.samples, 9);
         let fractal = &scene.surfaces[6];
         assert_eq!(fractal.triangles.len(), 4usize.pow(7));
-        let fractal_patches = patches
-            .patches
-            .iter()
-            .filter(|p| p.kind == PatchKind::Surface { surface: 6 })
-            .count();
-        assert_eq!(
-            fractal_patches,
-            fractal.triangles.len(),
-            "the fractal is never cut"
-        );
+        let fractal_patches = patches.patches.iter().filter(|p| p.kind == PatchKind::Surface { surface: 6 }).count();
+        assert_eq!(fractal_patches, fractal.triangles.len(), "the fractal is never cut");
         // The room is closed and faces inward: its patches' normals point at the centre.
         let (center, radius) = scene_bounds(&patches);
         assert!(radius > 0.0);
-        for p in patches
-            .patches
-            .iter()
-            .filter(|p| matches!(p.kind, PatchKind::Surface { surface: 0..6 }))
-        {
+        for p in patches.patches.iter().filter(|p| matches!(p.kind, PatchKind::Surface { surface: 0..6 })) {
             assert!((center - p.vertices[0]).dot(p.normal) > 0.0);
         }
     }

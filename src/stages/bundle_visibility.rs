@@ -83,7 +83,14 @@ impl BundleVisibility {
         }
     }
 
-    fn record(&self, encoder: &mut wgpu::CommandEncoder, pipeline: &wgpu::RenderPipeline, label: &str, vertices: &wgpu::Buffer, patch_count: u32) {
+    fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        pipeline: &wgpu::RenderPipeline,
+        label: &str,
+        vertices: &wgpu::Buffer,
+        patch_count: u32,
+    ) {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some(label),
             color_attachments: &[],
