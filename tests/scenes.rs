@@ -1,0 +1,59 @@
+//! The shipped scenes against the Mitsuba 3 references in `../shared/refs/`.
+
+mod common;
+
+use firstshot::image::{image_error, Image};
+use firstshot::render::{render, RenderOptions};
+use firstshot::scene;
+
+fn cornell(iterations: u32) -> Option<(Image, Image)> {
+    let ctx = common::gpu()?;
+    let refs = common::refs_dir();
+    let scene = scene::load(std::path::Path::new("scenes/cornell_box.toml")).unwrap();
+    let mut options = RenderOptions::from_scene(&scene);
+    options.iterations = iterations;
+    let patches = scene::tessellate(&scene, options.patch_size).unwrap();
+    let image = render(&ctx, &scene, &patches, &options).unwrap().image;
+    let name = if iterations == 0 { "direct" } else { "full" };
+    let reference = Image::read_exr(&refs.join(format!("cornell_box.{name}.exr"))).unwrap();
+    Some((image, reference))
+}
+
+fn save_on_failure(name: &str, image: &Image, reference: &Image) {
+    let dir = common::output_dir(name);
+    image.write_exr(&dir.join("actual.exr"), &[]).unwrap();
+    reference.write_exr(&dir.join("expected.exr"), &[]).unwrap();
+    let diff = Image::new(
+        image.width,
+        image.height,
+        image.pixels.iter().zip(&reference.pixels).map(|(a, b)| [0, 1, 2].map(|c| (a[c] - b[c]).abs())).collect(),
+    );
+    diff.write_exr(&dir.join("difference.exr"), &[]).unwrap();
+}
+
+#[test]
+fn test01_cornell_direct_light_matches_the_reference() {
+    let Some((image, reference)) = cornell(0) else { return };
+    let e = image_error(&image, &reference).unwrap();
+    eprintln!("cornell direct: {e:?}");
+    // The light's own pixels: wherever the reference is the light's radiance exactly (fully
+    // covered), ours is too, so the conventions (camera, winding, image orientation) agree.
+    let light = [18.387f32, 13.9873, 6.75357];
+    let mut light_pixels = 0;
+    for (i, (a, b)) in image.pixels.iter().zip(&reference.pixels).enumerate() {
+        if (0..3).all(|c| (b[c] - light[c]).abs() < 1e-3 * light[c]) {
+            light_pixels += 1;
+            if (0..3).any(|c| (a[c] - light[c]).abs() > 1e-3 * light[c]) {
+                save_on_failure("cornell_direct", &image, &reference);
+                panic!("pixel {} {}: reference shows the light, ours {a:?}", i % 512, i / 512);
+            }
+        }
+    }
+    assert!(light_pixels > 100, "the reference should show the light, found {light_pixels} pixels");
+    // DESIGN.md / issue: mean brightness within 2% per channel. Measured: +0.4 to +0.6%.
+    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.02) && e.relative_rmse < 0.08;
+    if !ok {
+        save_on_failure("cornell_direct", &image, &reference);
+    }
+    assert!(ok, "{e:?}");
+}
