@@ -45,6 +45,16 @@ struct RenderArgs {
     /// Stochastic iterations (ray-bundle steps); 0 = emission and first shot only.
     #[arg(long, value_name = "N")]
     iterations: Option<u32>,
+    /// Stop the iteration after this much wall time (whichever of --iterations and --time
+    /// comes first).
+    #[arg(long, value_name = "SECONDS")]
+    time: Option<f64>,
+    /// Solve the area lights as emitters inside the iteration instead of first shot.
+    #[arg(long)]
+    no_first_shot: bool,
+    /// Pixels along an edge of each parallel projection of the iteration.
+    #[arg(long, value_name = "R")]
+    bundle_resolution: Option<u32>,
     /// Random seed; the same seed, scene and flags give the same image.
     #[arg(long, value_name = "N")]
     seed: Option<u64>,
@@ -189,12 +199,25 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         }
         options.patch_size = v;
     }
+    if let Some(t) = args.time {
+        if !(t.is_finite() && t > 0.0) {
+            return Err(usage(format!("--time {t}: expected a number of seconds > 0")));
+        }
+        options.time_limit = Some(std::time::Duration::from_secs_f64(t));
+        if args.iterations.is_none() {
+            options.iterations = u32::MAX;
+        }
+    }
+    options.first_shot = !args.no_first_shot;
     if let Some(v) = args.light_window {
         options.light_window = v;
     }
-    for (flag, v) in
-        [("--width", args.width), ("--height", args.height), ("--hemicube-resolution", args.hemicube_resolution)]
-    {
+    for (flag, v) in [
+        ("--width", args.width),
+        ("--height", args.height),
+        ("--hemicube-resolution", args.hemicube_resolution),
+        ("--bundle-resolution", args.bundle_resolution),
+    ] {
         if let Some(v) = v
             && !(1..=16384).contains(&v)
         {
@@ -204,6 +227,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     options.width = args.width.unwrap_or(options.width);
     options.height = args.height.unwrap_or(options.height);
     options.hemicube_resolution = args.hemicube_resolution.unwrap_or(options.hemicube_resolution);
+    options.bundle_resolution = args.bundle_resolution.unwrap_or(options.bundle_resolution);
     let (exr_path, png_path) = output_paths(&args, &scene_path)?;
     say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
 
@@ -248,6 +272,15 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     if let Some(stats) = &args.stats {
         let json = serde_json::to_string_pretty(&rendered.stats).context("encoding the stats")?;
         firstshot::image::write_atomically(stats, json.as_bytes())?;
+    }
+    if rendered.stats.iterations > 0 {
+        say(format!(
+            "iteration: {} steps of {r}x{r} bundles, median {:.1} ms per step ({:.1} steps/s)",
+            rendered.stats.iterations,
+            rendered.stats.iteration_ms_median,
+            1e3 / rendered.stats.iteration_ms_median.max(1e-9),
+            r = options.bundle_resolution
+        ));
     }
     say(format!(
         "wrote {} and {} ({:.0} ms in all)",

@@ -2,8 +2,8 @@
 
 mod common;
 
-use firstshot::image::{image_error, Image};
-use firstshot::render::{render, RenderOptions};
+use firstshot::image::{Image, image_error};
+use firstshot::render::{RenderOptions, render};
 use firstshot::scene;
 
 fn cornell(iterations: u32) -> Option<(Image, Image)> {
