@@ -46,3 +46,100 @@ fn test01_furnace_converges_to_emission_over_one_minus_albedo() {
         assert!((mean[c] - 2.0).abs() < 0.02, "mean {mean:?}");
     }
 }
+
+/// Form factor from a differential area at `x` with normal `n` to a polygon (Lambert's
+/// contour formula), the test's own oracle.
+fn point_to_polygon(x: DVec3, n: DVec3, polygon: &[DVec3]) -> f64 {
+    let mut sum = 0.0;
+    for i in 0..polygon.len() {
+        let a = (polygon[i] - x).normalize();
+        let b = (polygon[(i + 1) % polygon.len()] - x).normalize();
+        let angle = a.dot(b).clamp(-1.0, 1.0).acos();
+        let c = a.cross(b);
+        if c.length() > 0.0 {
+            sum += angle * n.dot(c.normalize());
+        }
+    }
+    (sum / (2.0 * std::f64::consts::PI)).abs()
+}
+
+#[test]
+fn test02_received_radiance_matches_the_form_factor() {
+    let Some(ctx) = gpu() else { return };
+    // An emitting square (radiance 1, black) and, facing it, one receiving triangle of
+    // albedo 1: every pixel showing the triangle converges to F(triangle -> square).
+    let h = 0.4;
+    let square = [
+        DVec3::new(-1.0, -1.0, 0.0),
+        DVec3::new(1.0, -1.0, 0.0),
+        DVec3::new(1.0, 1.0, 0.0),
+        DVec3::new(-1.0, 1.0, 0.0),
+    ];
+    let receiver = [DVec3::new(-0.3, -0.2, h), DVec3::new(0.1, 0.35, h), DVec3::new(0.35, -0.25, h)];
+    let mut scene = bare_scene();
+    scene.camera.position = DVec3::new(0.02, 0.01, h / 2.0);
+    scene.camera.look_at = DVec3::new(0.02, 0.01, h);
+    scene.camera.fov_y = 60.0;
+    scene.camera.width = 16;
+    scene.camera.height = 16;
+    scene.materials = vec![
+        Material { name: "black".into(), kind: MaterialKind::Diffuse { albedo: [0.0; 3] } },
+        Material { name: "white".into(), kind: MaterialKind::Diffuse { albedo: [1.0; 3] } },
+    ];
+    let facing = |t: [DVec3; 3], towards: DVec3| {
+        if (t[1] - t[0]).cross(t[2] - t[0]).dot(towards) > 0.0 { t } else { [t[0], t[2], t[1]] }
+    };
+    let mut patches = patches_of(
+        &[
+            facing([square[0], square[1], square[2]], DVec3::Z),
+            facing([square[0], square[2], square[3]], DVec3::Z),
+            facing(receiver, -DVec3::Z),
+        ],
+        vec![],
+    );
+    for p in &mut patches.patches[..2] {
+        p.material = Some(0);
+        p.emission = [1.0; 3];
+    }
+    patches.patches[2].material = Some(1);
+    // Oracle: the receiver's mean of the point-to-square form factor, by a 32 x 32 split.
+    let sub = split(receiver, 32);
+    let form_factor = sub.iter().map(|t| point_to_polygon((t[0] + t[1] + t[2]) / 3.0, -DVec3::Z, &square)).sum::<f64>()
+        / sub.len() as f64;
+    // Noise measured, not assumed: independent runs with different seeds, their standard
+    // error of the mean.
+    let runs: Vec<f64> = (0..8)
+        .map(|seed| {
+            let mut o = options(&scene, 250, 100 + seed);
+            o.bundle_resolution = 48;
+            let image = render(&ctx, &scene, &patches, &o).unwrap().image;
+            // The centre pixels see the receiver (the camera looks at it from 0.2 away).
+            let centre: Vec<f64> =
+                (6..10).flat_map(|y| (6..10).map(move |x| (x, y))).map(|(x, y)| image.at(x, y)[0] as f64).collect();
+            centre.iter().sum::<f64>() / centre.len() as f64
+        })
+        .collect();
+    let mean = runs.iter().sum::<f64>() / runs.len() as f64;
+    let var = runs.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (runs.len() - 1) as f64;
+    let standard_error = (var / runs.len() as f64).sqrt();
+    eprintln!("form factor {form_factor:.5}, measured {mean:.5} +- {standard_error:.5} (runs {runs:?})");
+    assert!(standard_error < 0.05 * form_factor, "too noisy to judge: {standard_error}");
+    // Four standard errors, plus the 1/N bias of starting from J = 0 (none here: the
+    // receiver's first estimate is already unbiased, the emitter does not depend on J).
+    assert!((mean - form_factor).abs() < 4.0 * standard_error, "measured {mean} against {form_factor}");
+}
+
+#[test]
+fn test03_same_seed_same_bits_and_seeds_agree_within_noise() {
+    let Some(ctx) = gpu() else { return };
+    let (scene, patches) = furnace(0.6, 1.0);
+    let run = |seed| render(&ctx, &scene, &patches, &options(&scene, 40, seed)).unwrap().image;
+    let (a, b, c) = (run(7), run(7), run(8));
+    let bits = |i: &firstshot::image::Image| i.pixels.iter().flat_map(|p| p.map(f32::to_bits)).collect::<Vec<u32>>();
+    assert_eq!(bits(&a), bits(&b), "the same seed must give the same image, bit for bit");
+    assert_ne!(bits(&a), bits(&c), "another seed must give another image");
+    // Both estimate L = 2.5 everywhere: their means agree within the per-pixel noise.
+    let (ma, mc) = (a.mean()[0], c.mean()[0]);
+    let spread = a.pixels.iter().map(|p| (p[0] as f64 - ma).powi(2)).sum::<f64>() / a.pixels.len() as f64;
+    assert!((ma - mc).abs() < 4.0 * spread.sqrt() + 1e-6, "means {ma} and {mc}, pixel spread {}", spread.sqrt());
+}

@@ -57,3 +57,38 @@ fn test01_cornell_direct_light_matches_the_reference() {
     }
     assert!(ok, "{e:?}");
 }
+
+#[test]
+fn test02_cornell_full_global_illumination_matches_the_reference() {
+    let Some((image, reference)) = cornell(1000) else { return };
+    let e = image_error(&image, &reference).unwrap();
+    eprintln!("cornell full, 1000 steps: {e:?}");
+    // Mean within 2% per channel (measured: -0.6%, -1.3%, -0.7%; the running mean starts
+    // from J = 0, a bias falling as 1/steps), RMSE 5.5% at patch size 40.
+    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.02) && e.relative_rmse < 0.08;
+    if !ok {
+        save_on_failure("cornell_full", &image, &reference);
+    }
+    assert!(ok, "{e:?}");
+}
+
+#[test]
+fn test03_with_and_without_first_shot_converge_to_the_same_image() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = scene::load(std::path::Path::new("scenes/cornell_box.toml")).unwrap();
+    let patches = scene::tessellate(&scene, 80.0).unwrap();
+    let run = |first_shot: bool, iterations: u32| {
+        let mut o = RenderOptions::from_scene(&scene);
+        (o.width, o.height) = (64, 64);
+        o.hemicube_resolution = 128;
+        o.bundle_resolution = 128;
+        o.patch_size = 80.0;
+        o.first_shot = first_shot;
+        o.iterations = iterations;
+        render(&ctx, &scene, &patches, &o).unwrap().image
+    };
+    let difference = |n| image_error(&run(true, n), &run(false, n)).unwrap().relative_rmse;
+    let (early, late) = (difference(25), difference(400));
+    eprintln!("with vs without first shot: relative difference {early:.4} after 25 steps, {late:.4} after 400");
+    assert!(late < early / 2.0, "the difference must fall as steps grow: {early} then {late}");
+}
