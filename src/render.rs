@@ -36,6 +36,9 @@ pub struct RenderOptions {
     pub first_shot: bool,
     /// Stop the iteration after this much wall time, if given.
     pub time_limit: Option<std::time::Duration>,
+    /// Initial fragment room of a bundle step; `None` takes the geometric bound, which no
+    /// step exceeds. Tests set it small to exercise the overflow-and-redo path.
+    pub bundle_capacity: Option<u64>,
 }
 
 impl RenderOptions {
@@ -51,6 +54,7 @@ impl RenderOptions {
             bundle_resolution: scene.settings.bundle_resolution,
             first_shot: true,
             time_limit: None,
+            bundle_capacity: None,
         }
     }
 }
@@ -263,7 +267,9 @@ fn iterate(
     let device = &ctx.device;
     let started = Instant::now();
     let resolution = options.bundle_resolution;
-    let mut capacity = crate::iteration::fragment_bound(patches, buffers.radius, resolution.max(4));
+    let mut capacity = options
+        .bundle_capacity
+        .unwrap_or_else(|| crate::iteration::fragment_bound(patches, buffers.radius, resolution.max(4)));
     let mut iteration = crate::iteration::Iteration::new(ctx, buffers, resolution, capacity)?;
     let copy = |encoder: &mut wgpu::CommandEncoder, from: &wgpu::Buffer, to: &wgpu::Buffer| {
         encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());

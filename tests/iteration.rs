@@ -143,3 +143,18 @@ fn test03_same_seed_same_bits_and_seeds_agree_within_noise() {
     let spread = a.pixels.iter().map(|p| (p[0] as f64 - ma).powi(2)).sum::<f64>() / a.pixels.len() as f64;
     assert!((ma - mc).abs() < 4.0 * spread.sqrt() + 1e-6, "means {ma} and {mc}, pixel spread {}", spread.sqrt());
 }
+
+#[test]
+fn test04_fragment_overflow_is_detected_and_redone_exactly() {
+    let Some(ctx) = gpu() else { return };
+    let (scene, patches) = furnace(0.5, 1.0);
+    let run = |capacity: Option<u64>| {
+        let mut o = options(&scene, 20, 3);
+        o.bundle_capacity = capacity;
+        render(&ctx, &scene, &patches, &o).unwrap()
+    };
+    let (normal, tight) = (run(None), run(Some(16)));
+    assert!(tight.stats.bundle_capacity > 16, "the list must have grown");
+    let bits = |i: &firstshot::image::Image| i.pixels.iter().flat_map(|p| p.map(f32::to_bits)).collect::<Vec<u32>>();
+    assert_eq!(bits(&normal.image), bits(&tight.image), "redone steps must give exactly the image of a run with room");
+}
