@@ -127,19 +127,25 @@ fn compare(a: &Path, b: &Path) -> Result<(), Failure> {
     let ia = Image::read_exr(a)?;
     let ib = Image::read_exr(b)?;
     let e = image_error(&ia, &ib)?;
-    println!("relative RMSE      {:.5}", e.relative_rmse);
-    println!(
-        "ratio of means     {:.4} {:.4} {:.4}  (error of the mean {:+.2}% {:+.2}% {:+.2}%)",
+    let mut out = String::new();
+    out.push_str(&format!("relative RMSE      {:.5}\n", e.relative_rmse));
+    out.push_str(&format!(
+        "ratio of means     {:.4} {:.4} {:.4}  (error of the mean {:+.2}% {:+.2}% {:+.2}%)\n",
         e.mean_ratio[0],
         e.mean_ratio[1],
         e.mean_ratio[2],
         (e.mean_ratio[0] - 1.0) * 100.0,
         (e.mean_ratio[1] - 1.0) * 100.0,
         (e.mean_ratio[2] - 1.0) * 100.0
-    );
-    println!("means of A         {:.5} {:.5} {:.5}", e.mean[0], e.mean[1], e.mean[2]);
-    println!("means of B         {:.5} {:.5} {:.5}", e.reference_mean[0], e.reference_mean[1], e.reference_mean[2]);
-    println!("pixels counted     {} (2x2 downsampled, lights left out)", e.pixels);
+    ));
+    out.push_str(&format!("means of A         {:.5} {:.5} {:.5}\n", e.mean[0], e.mean[1], e.mean[2]));
+    out.push_str(&format!(
+        "means of B         {:.5} {:.5} {:.5}\n",
+        e.reference_mean[0], e.reference_mean[1], e.reference_mean[2]
+    ));
+    out.push_str(&format!("pixels counted     {} (2x2 downsampled, lights left out)\n", e.pixels));
+    // A closed pipe (`| head`) is the reader's choice, not a failure of ours.
+    let _ = std::io::Write::write_all(&mut std::io::stdout().lock(), out.as_bytes());
     Ok(())
 }
 
