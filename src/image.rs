@@ -47,7 +47,10 @@ impl Image {
         self.pixels[(y * self.width + x) as usize]
     }
 
-    /// The EXR file (float32 R, G, B) as bytes; `attributes` become text attributes.
+    /// The EXR file (float32 R, G, B) as bytes; `attributes` become one text attribute,
+    /// `firstshot`, of `key=value` lines (one attribute, because the EXR writer keeps
+    /// attributes in a hash map whose order changes from run to run, and the same render
+    /// must give the same bytes).
     pub fn exr_bytes(&self, attributes: &[(&str, String)]) -> Result<Vec<u8>> {
         use exr::prelude::*;
         let w = self.width as usize;
@@ -56,8 +59,9 @@ impl Image {
             (p[0], p[1], p[2])
         });
         let mut image = exr::image::Image::from_channels((w, self.height as usize), channels);
-        for (key, value) in attributes {
-            image.attributes.other.insert(Text::from(*key), AttributeValue::Text(Text::from(value.as_str())));
+        if !attributes.is_empty() {
+            let text: String = attributes.iter().map(|(k, v)| format!("{k}={v}\n")).collect();
+            image.attributes.other.insert(Text::from("firstshot"), AttributeValue::Text(Text::from(text.as_str())));
         }
         let mut bytes = std::io::Cursor::new(Vec::new());
         image

@@ -11,6 +11,7 @@
 //! 4. `stages::image_estimate`: every step adds an estimate of each camera pixel; the image is
 //!    the running mean, written by `image` as EXR + PNG.
 
+pub mod checkpoint;
 pub mod error;
 pub mod first_shot;
 pub mod scene;

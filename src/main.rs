@@ -2,13 +2,18 @@
 
 use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
+use firstshot::checkpoint::Checkpoint;
 use firstshot::first_shot::LightWindow;
 use firstshot::gpu::context::{AdapterChoice, Context, list_adapters};
+use firstshot::image::Image as RenderedImage;
 use firstshot::image::{Image, image_error};
-use firstshot::render::{RenderOptions, render};
+use firstshot::render::{Hooks, RenderOptions, render_with};
 use firstshot::scene;
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 #[derive(Parser)]
@@ -85,6 +90,12 @@ struct RenderArgs {
     /// No progress output.
     #[arg(long)]
     quiet: bool,
+    /// Write the running image and the iteration state every this many seconds.
+    #[arg(long, value_name = "S")]
+    checkpoint_every: Option<f64>,
+    /// Continue the run whose checkpoint belongs to --out.
+    #[arg(long)]
+    resume: bool,
 }
 
 /// A failure and the exit status it maps to (CLI.md: 2 usage or scene error, 1 run failure).
@@ -101,6 +112,100 @@ impl<E: Into<anyhow::Error>> From<E> for Failure {
             _ => 1,
         };
         Failure { status, error }
+    }
+}
+
+fn io_failure(path: &Path, e: std::io::Error) -> Failure {
+    Failure { status: 1, error: anyhow::anyhow!("{}: {e}", path.display()) }
+}
+
+/// Fails before any work if the output's directory cannot take a new file.
+fn check_writable(exr: &Path) -> Result<(), Failure> {
+    let probe = exr.with_extension(format!("probe.{}.tmp", std::process::id()));
+    std::fs::write(&probe, b"").map_err(|e| io_failure(exr, e))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+/// Progress (a bar on a terminal, a line every few seconds elsewhere, nothing with
+/// --quiet), Ctrl-C and checkpoints, for `render_with`.
+struct CliHooks<'a> {
+    quiet: bool,
+    bar: Option<indicatif::ProgressBar>,
+    last_line: Instant,
+    iteration_start: Instant,
+    start_step: u32,
+    stop: Arc<AtomicBool>,
+    checkpoint_every: Option<std::time::Duration>,
+    last_checkpoint: Instant,
+    checkpoint_path: PathBuf,
+    exr_path: PathBuf,
+    png_path: PathBuf,
+    attributes: &'a dyn Fn(u32) -> [(&'static str, String); 4],
+}
+
+/// Seconds between progress lines when stderr is not a terminal.
+const PLAIN_PROGRESS_SECONDS: u64 = 5;
+
+impl Hooks for CliHooks<'_> {
+    fn phase(&mut self, name: &str, ms: f64) {
+        if !self.quiet {
+            if let Some(bar) = &self.bar {
+                bar.println(format!("{name}: {ms:.0} ms"));
+            } else {
+                eprintln!("{name}: {ms:.0} ms");
+            }
+        }
+        self.iteration_start = Instant::now();
+    }
+
+    fn progress(&mut self, done: u32, total: u32) {
+        if self.quiet {
+            return;
+        }
+        let elapsed = self.iteration_start.elapsed().as_secs_f64();
+        let rate = (done - self.start_step.min(done)) as f64 / elapsed.max(1e-9);
+        if std::io::stderr().is_terminal() {
+            let bar = self.bar.get_or_insert_with(|| {
+                let bar = if total == u32::MAX {
+                    indicatif::ProgressBar::new_spinner()
+                } else {
+                    indicatif::ProgressBar::new(total as u64)
+                };
+                bar.set_style(
+                    indicatif::ProgressStyle::with_template(
+                        "{spinner} [{bar:40}] step {pos}/{len} {per_sec} elapsed {elapsed} remaining {eta}",
+                    )
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+                );
+                bar
+            });
+            bar.set_position(done as u64);
+        } else if self.last_line.elapsed().as_secs() >= PLAIN_PROGRESS_SECONDS {
+            self.last_line = Instant::now();
+            let of = if total == u32::MAX { String::new() } else { format!("/{total}") };
+            eprintln!("step {done}{of}, {rate:.1} steps/s, {elapsed:.0} s");
+        }
+    }
+
+    fn stop_requested(&self) -> bool {
+        self.stop.load(Ordering::SeqCst)
+    }
+
+    fn checkpoint_due(&mut self) -> bool {
+        self.checkpoint_every.is_some_and(|every| self.last_checkpoint.elapsed() >= every)
+    }
+
+    fn wants_final_checkpoint(&self) -> bool {
+        self.checkpoint_every.is_some() || self.stop_requested()
+    }
+
+    fn checkpoint(&mut self, checkpoint: Checkpoint, image: &RenderedImage) -> firstshot::Result<()> {
+        image.write_exr(&self.exr_path, &(self.attributes)(checkpoint.step))?;
+        image.write_png(&self.png_path, image.auto_exposure())?;
+        checkpoint.write(&self.checkpoint_path)?;
+        self.last_checkpoint = Instant::now();
+        Ok(())
     }
 }
 
@@ -246,11 +351,77 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         patches.samples.len()
     ));
 
+    if let Some(dir) = exr_path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| io_failure(dir, e))?;
+    }
+    check_writable(&exr_path)?;
+    let checkpoint_path = exr_path.with_extension("checkpoint");
+    let resume = if args.resume {
+        if !checkpoint_path.exists() {
+            return Err(usage(format!(
+                "--resume: no checkpoint at {} (it is written beside --out by --checkpoint-every or Ctrl-C)",
+                checkpoint_path.display()
+            )));
+        }
+        Some(Checkpoint::read(&checkpoint_path)?)
+    } else {
+        None
+    };
+    if let Some(c) = &resume
+        && c.fingerprint != firstshot::render::fingerprint(&scene, &options)
+    {
+        return Err(usage(format!(
+            "--resume: {} belongs to another scene or other flags (patch size, resolutions, seed, image size, first shot); run with the same ones or without --resume",
+            checkpoint_path.display()
+        )));
+    }
+    if let Some(s) = args.checkpoint_every
+        && !(s.is_finite() && s > 0.0)
+    {
+        return Err(usage(format!("--checkpoint-every {s}: expected a number of seconds > 0")));
+    }
+
     let ctx = Context::new(&args.adapter)?;
     say(format!("adapter: {}", ctx.summary));
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
 
-    let mut rendered = render(&ctx, &scene, &patches, &options)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // The first Ctrl-C finishes the step and writes everything; a second one quits now.
+        let _ = ctrlc::set_handler(move || {
+            if stop.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+        });
+    }
+    let attributes = |steps: u32| {
+        [
+            ("firstshot.scene", scene_path.display().to_string()),
+            ("firstshot.seed", options.seed.to_string()),
+            ("firstshot.iterations", steps.to_string()),
+            ("firstshot.adapter", ctx.summary.to_string()),
+        ]
+    };
+    let mut hooks = CliHooks {
+        quiet: args.quiet,
+        bar: None,
+        last_line: Instant::now(),
+        iteration_start: Instant::now(),
+        start_step: resume.as_ref().map_or(0, |c| c.step),
+        stop: stop.clone(),
+        checkpoint_every: args.checkpoint_every.map(std::time::Duration::from_secs_f64),
+        last_checkpoint: Instant::now(),
+        checkpoint_path: checkpoint_path.clone(),
+        exr_path: exr_path.clone(),
+        png_path: png_path.clone(),
+        attributes: &attributes,
+    };
+    let result = render_with(&ctx, &scene, &patches, &options, resume.as_ref(), &mut hooks);
+    if let Some(bar) = hooks.bar.take() {
+        bar.finish_and_clear();
+    }
+    let mut rendered = result?;
     if rendered.stats.first_shot {
         say(format!(
             "first shot: {} light samples, {} faces of {r}x{r}, {} pairs, {:.0} ms",
@@ -264,22 +435,15 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     rendered.stats.tessellation_ms = tessellation_ms;
     rendered.stats.total_ms = start.elapsed().as_secs_f64() * 1e3;
 
-    if let Some(dir) = exr_path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    let attributes = [
-        ("firstshot.scene", scene_path.display().to_string()),
-        ("firstshot.seed", options.seed.to_string()),
-        ("firstshot.iterations", options.iterations.to_string()),
-        ("firstshot.adapter", ctx.summary.to_string()),
-    ];
-    rendered.image.write_exr(&exr_path, &attributes)?;
+    let t = Instant::now();
+    let steps = if options.iterations == 0 { 0 } else { rendered.stats.iterations };
+    rendered.image.write_exr(&exr_path, &attributes(steps))?;
     rendered.image.write_png(&png_path, rendered.image.auto_exposure())?;
     if let Some(stats) = &args.stats {
         let json = serde_json::to_string_pretty(&rendered.stats).context("encoding the stats")?;
         firstshot::image::write_atomically(stats, json.as_bytes())?;
     }
-    if rendered.stats.iterations > 0 {
+    if rendered.stats.iterations > 0 && options.iterations > 0 {
         say(format!(
             "iteration: {} steps of {r}x{r} bundles, median {:.1} ms per step ({:.1} steps/s)",
             rendered.stats.iterations,
@@ -289,10 +453,19 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         ));
     }
     say(format!(
-        "wrote {} and {} ({:.0} ms in all)",
+        "wrote {} and {} in {:.0} ms ({:.0} ms in all)",
         exr_path.display(),
         png_path.display(),
+        t.elapsed().as_secs_f64() * 1e3,
         start.elapsed().as_secs_f64() * 1e3
     ));
+    if rendered.interrupted {
+        say(format!(
+            "interrupted after step {}: continue with the same flags and --resume ({})",
+            rendered.stats.iterations,
+            checkpoint_path.display()
+        ));
+        return Err(Failure { status: 130, error: anyhow::anyhow!("interrupted") });
+    }
     Ok(())
 }

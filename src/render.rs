@@ -1,6 +1,7 @@
 //! The order of the pipeline: tessellated scene on the GPU -> first shot -> iteration loop
 //! -> image. `main.rs` and the tests call `render`.
 
+use crate::checkpoint::Checkpoint;
 use crate::first_shot::{self, LightWindow};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{AdapterSummary, Context};
@@ -94,6 +95,51 @@ pub struct RenderStats {
 pub struct Rendered {
     pub image: Image,
     pub stats: RenderStats,
+    /// The run was stopped by `Hooks::stop_requested` before its step count.
+    pub interrupted: bool,
+}
+
+/// What a caller watches and steers during a render; every method has a do-nothing
+/// default, so `NoHooks` is a full implementation.
+pub trait Hooks {
+    /// A phase ended after `ms` milliseconds ("first shot", "iteration", ...).
+    fn phase(&mut self, _name: &str, _ms: f64) {}
+    /// `done` steps so far of `total` (u32::MAX when only a time limit bounds the run).
+    fn progress(&mut self, _done: u32, _total: u32) {}
+    /// Asked after every step: stop after it (Ctrl-C). The run then ends as if its step
+    /// count had been reached, with `Rendered::interrupted` set.
+    fn stop_requested(&self) -> bool {
+        false
+    }
+    /// Asked after every batch of steps: hand a checkpoint to `checkpoint` now?
+    fn checkpoint_due(&mut self) -> bool {
+        false
+    }
+    /// Whether `checkpoint` also gets the state at the end of the run.
+    fn wants_final_checkpoint(&self) -> bool {
+        false
+    }
+    /// The iteration state and the image so far.
+    fn checkpoint(&mut self, _checkpoint: Checkpoint, _image: &Image) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Hooks that watch nothing and never stop.
+pub struct NoHooks;
+impl Hooks for NoHooks {}
+
+/// Identifies a scene and every option that changes the image (not the step count or the
+/// time limit, which a resumed run may change), so a checkpoint is only resumed by the run
+/// it belongs to.
+pub fn fingerprint(scene: &Scene, options: &RenderOptions) -> u64 {
+    let mut scene = scene.clone();
+    scene.source = Default::default();
+    let mut options = options.clone();
+    options.iterations = 0;
+    options.time_limit = None;
+    options.bundle_capacity = None;
+    crate::checkpoint::fnv1a(format!("{scene:?}\n{options:?}").as_bytes())
 }
 
 /// Checks, before any GPU work, that the scene and image fit the device's limits.
@@ -135,6 +181,18 @@ fn milliseconds(since: Instant) -> f64 {
 
 /// Renders `scene` (already tessellated into `patches`) on `ctx`.
 pub fn render(ctx: &Context, scene: &Scene, patches: &Patches, options: &RenderOptions) -> Result<Rendered> {
+    render_with(ctx, scene, patches, options, None, &mut NoHooks)
+}
+
+/// As `render`, continuing from `resume` if given, watched and steered by `hooks`.
+pub fn render_with(
+    ctx: &Context,
+    scene: &Scene,
+    patches: &Patches,
+    options: &RenderOptions,
+    resume: Option<&Checkpoint>,
+    hooks: &mut dyn Hooks,
+) -> Result<Rendered> {
     let start = Instant::now();
     check_limits(&ctx.limits(), patches, options)?;
     if !options.first_shot && scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Point { .. })) {
@@ -153,6 +211,9 @@ pub fn render(ctx: &Context, scene: &Scene, patches: &Patches, options: &RenderO
     } else {
         Some(first_shot::run(ctx, &mut buffers, patches, options.hemicube_resolution, options.light_window)?)
     };
+    if let Some(f) = &fs {
+        hooks.phase("first shot", f.ms);
+    }
     // Built after the first shot: it binds the first-shot table.
     let estimate = ImageEstimate::new(device, &buffers, &camera);
     ctx.queue.write_buffer(
@@ -173,12 +234,17 @@ pub fn render(ctx: &Context, scene: &Scene, patches: &Patches, options: &RenderO
         direct_image(ctx, scene, options, &buffers, &camera, &estimate, near);
         DIRECT_CAMERA_SAMPLES_PER_AXIS * DIRECT_CAMERA_SAMPLES_PER_AXIS
     } else {
-        iteration_stats = iterate(ctx, scene, patches, options, &buffers, &camera, &estimate, near, start)?;
+        let run =
+            Run { ctx, scene, patches, options, buffers: &buffers, camera: &camera, estimate: &estimate, near, start };
+        iteration_stats = iterate(&run, resume, hooks)?;
+        hooks.phase("iteration", iteration_stats.ms);
         iteration_stats.steps
     };
     let pixels = estimate.read_mean(device, &ctx.queue)?;
     let image_ms = milliseconds(image_start);
+    ctx.check()?;
     Ok(Rendered {
+        interrupted: iteration_stats.interrupted,
         image: Image::new(options.width, options.height, pixels),
         stats: RenderStats {
             adapter: ctx.summary.clone(),
@@ -243,27 +309,44 @@ struct IterationStats {
     capacity: u32,
     step_ms_median: f64,
     ms: f64,
+    interrupted: bool,
 }
 
 /// Steps per batch between checks of the fragment overflow flag (each check waits for the GPU).
 const STEPS_PER_BATCH: u32 = 8;
 
-/// The stochastic iteration: `options.iterations` steps (or fewer if `time_limit` ends it),
-/// each adding one image estimate. Steps run in batches; the state and image sum are kept
-/// at each batch's start, so a batch in which a line ran out of fragment room is redone,
-/// exactly, with a larger list.
-#[allow(clippy::too_many_arguments)]
-fn iterate(
-    ctx: &Context,
-    scene: &Scene,
-    patches: &Patches,
-    options: &RenderOptions,
-    buffers: &SceneBuffers,
-    camera: &CameraItemBuffer,
-    estimate: &ImageEstimate,
+/// What the iteration works on.
+struct Run<'a> {
+    ctx: &'a Context,
+    scene: &'a Scene,
+    patches: &'a Patches,
+    options: &'a RenderOptions,
+    buffers: &'a SceneBuffers,
+    camera: &'a CameraItemBuffer,
+    estimate: &'a ImageEstimate,
     near: f64,
-    run_start: Instant,
-) -> Result<IterationStats> {
+    start: Instant,
+}
+
+impl Run<'_> {
+    fn checkpoint(&self, step: u32) -> Result<(Checkpoint, Image)> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let state: Vec<u8> =
+            crate::gpu::buffers::read_back(device, queue, &self.buffers.state, self.buffers.state.size())?;
+        let image_sum: Vec<u8> =
+            crate::gpu::buffers::read_back(device, queue, &self.estimate.image_sum, self.estimate.image_sum.size())?;
+        let pixels = self.estimate.read_mean(device, queue)?;
+        let checkpoint = Checkpoint { fingerprint: fingerprint(self.scene, self.options), step, state, image_sum };
+        Ok((checkpoint, Image::new(self.options.width, self.options.height, pixels)))
+    }
+}
+
+/// The stochastic iteration: `options.iterations` steps (or fewer if `time_limit` or the
+/// hooks end it), each adding one image estimate. Steps run in batches; the state and image
+/// sum are kept at each batch's start, so a batch in which a line ran out of fragment room
+/// is redone, exactly, with a larger list.
+fn iterate(run: &Run, resume: Option<&Checkpoint>, hooks: &mut dyn Hooks) -> Result<IterationStats> {
+    let Run { ctx, scene, patches, options, buffers, camera, estimate, near, start: run_start } = *run;
     let device = &ctx.device;
     let started = Instant::now();
     let resolution = options.bundle_resolution;
@@ -271,6 +354,20 @@ fn iterate(
         .bundle_capacity
         .unwrap_or_else(|| crate::iteration::fragment_bound(patches, buffers.radius, resolution.max(4)));
     let mut iteration = crate::iteration::Iteration::new(ctx, buffers, resolution, capacity)?;
+    let mut step = 0u32;
+    if let Some(c) = resume {
+        if c.fingerprint != fingerprint(scene, options) {
+            return Err(Error::Usage(
+                "the checkpoint belongs to another scene or other flags (patch size, resolutions, seed, image size, first shot); run with the same ones or without --resume".into(),
+            ));
+        }
+        if c.state.len() as u64 != buffers.state.size() || c.image_sum.len() as u64 != estimate.image_sum.size() {
+            return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
+        }
+        ctx.queue.write_buffer(&buffers.state, 0, &c.state);
+        ctx.queue.write_buffer(&estimate.image_sum, 0, &c.image_sum);
+        step = c.step;
+    }
     let copy = |encoder: &mut wgpu::CommandEncoder, from: &wgpu::Buffer, to: &wgpu::Buffer| {
         encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
     };
@@ -294,23 +391,24 @@ fn iterate(
             _pad: [0; 2],
         }),
     );
-    let mut step = 0u32;
     let mut batch_ms = Vec::new();
-    while step < options.iterations {
+    let mut interrupted = false;
+    while step < options.iterations && !interrupted {
         if let Some(limit) = options.time_limit
             && run_start.elapsed() >= limit
         {
             break;
         }
         let batch_start = Instant::now();
-        let batch = STEPS_PER_BATCH.min(options.iterations - step);
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.snapshot") });
         copy(&mut encoder, &buffers.state, &state_backup);
         copy(&mut encoder, &estimate.image_sum, &image_backup);
         iteration.clear_overflow(&mut encoder);
         ctx.queue.submit([encoder.finish()]);
-        for k in step..step + batch {
+        let mut batch = 0;
+        while batch < STEPS_PER_BATCH && step + batch < options.iterations {
+            let k = step + batch;
             let (mut bundle, mut rng) =
                 crate::iteration::bundle_of_step(options.seed, k as u64, buffers.centre, buffers.radius, resolution);
             bundle.environment = [scene.environment[0], scene.environment[1], scene.environment[2], 0.0];
@@ -327,8 +425,15 @@ fn iterate(
             camera.record(&mut encoder, &buffers.vertices, buffers.patch_count);
             estimate.record(&mut encoder);
             ctx.queue.submit([encoder.finish()]);
+            batch += 1;
+            if hooks.stop_requested() {
+                interrupted = true;
+                break;
+            }
         }
-        if iteration.overflowed(ctx)? {
+        let overflowed = iteration.overflowed(ctx)?;
+        ctx.check()?;
+        if overflowed {
             // A line held more surfaces than the list had room for: restore the batch's
             // start and redo it with twice the room.
             let mut encoder = device
@@ -338,17 +443,28 @@ fn iterate(
             ctx.queue.submit([encoder.finish()]);
             capacity = capacity.saturating_mul(2);
             iteration = crate::iteration::Iteration::new(ctx, buffers, resolution, capacity)?;
+            interrupted = false;
             continue;
         }
         batch_ms.push(batch_start.elapsed().as_secs_f64() * 1e3 / batch as f64);
         step += batch;
+        hooks.progress(step, options.iterations);
+        if hooks.checkpoint_due() {
+            let (checkpoint, image) = run.checkpoint(step)?;
+            hooks.checkpoint(checkpoint, &image)?;
+        }
     }
     ctx.wait()?;
+    if hooks.wants_final_checkpoint() && step > 0 {
+        let (checkpoint, image) = run.checkpoint(step)?;
+        hooks.checkpoint(checkpoint, &image)?;
+    }
     batch_ms.sort_by(f64::total_cmp);
     Ok(IterationStats {
         steps: step,
         capacity: iteration.capacity,
         step_ms_median: batch_ms.get(batch_ms.len() / 2).copied().unwrap_or(0.0),
         ms: started.elapsed().as_secs_f64() * 1e3,
+        interrupted,
     })
 }

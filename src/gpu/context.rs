@@ -4,6 +4,7 @@
 use crate::{Error, Result};
 use serde::Serialize;
 use std::fmt;
+use std::sync::{Arc, Mutex};
 
 /// What `--adapter` asks for.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -69,6 +70,10 @@ pub struct Context {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub summary: AdapterSummary,
+    /// The first GPU error (validation, out of memory, device lost) reported since the last
+    /// `check`: wgpu reports these asynchronously, so the run collects them instead of
+    /// aborting, and `check` turns them into an `Error::Gpu`.
+    gpu_error: Arc<Mutex<Option<String>>>,
 }
 
 fn instance() -> wgpu::Instance {
@@ -139,7 +144,22 @@ impl Context {
             };
             match pollster::block_on(adapter.request_device(&desc)) {
                 Ok((device, queue)) => {
-                    return Ok(Context { adapter, device, queue, summary });
+                    let gpu_error = Arc::new(Mutex::new(None));
+                    let slot = gpu_error.clone();
+                    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+                        let message = match &e {
+                            wgpu::Error::OutOfMemory { .. } => format!("out of GPU memory: {e}"),
+                            _ => e.to_string(),
+                        };
+                        record(&slot, message);
+                    }));
+                    let slot = gpu_error.clone();
+                    device.set_device_lost_callback(move |reason, message| {
+                        if reason != wgpu::DeviceLostReason::Destroyed {
+                            record(&slot, format!("the device was lost ({reason:?}): {message}"));
+                        }
+                    });
+                    return Ok(Context { adapter, device, queue, summary, gpu_error });
                 }
                 Err(e) => failures.push(format!("{summary}: {e}")),
             }
@@ -160,11 +180,28 @@ impl Context {
         self.device.limits()
     }
 
-    /// Waits for all submitted work; a lost device or a timeout becomes an error.
+    /// Waits for all submitted work; a lost device, a timeout or any GPU error reported
+    /// meanwhile becomes an error.
     pub fn wait(&self) -> Result<()> {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
-            .map(|_| ())
-            .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))
+            .map_err(|e| Error::Gpu(format!("waiting for the GPU failed: {e}")))?;
+        self.check()
+    }
+
+    /// The first GPU error reported since the last check, if any.
+    pub fn check(&self) -> Result<()> {
+        match self.gpu_error.lock().map(|mut e| e.take()) {
+            Ok(Some(message)) => Err(Error::Gpu(message)),
+            _ => Ok(()),
+        }
+    }
+}
+
+fn record(slot: &Mutex<Option<String>>, message: String) {
+    if let Ok(mut e) = slot.lock()
+        && e.is_none()
+    {
+        *e = Some(message);
     }
 }
