@@ -92,6 +92,18 @@ pub struct Rendered {
     pub stats: RenderStats,
 }
 
+/// Checks, before any GPU work, that `options` can be honoured for `scene`: `main.rs` calls
+/// it before opening an adapter, so that such a refusal is a usage error (exit 2) even on a
+/// machine without one.
+pub fn check_options(scene: &Scene, options: &RenderOptions) -> Result<()> {
+    if !options.first_shot && scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Point { .. })) {
+        return Err(Error::Usage(
+            "--no-first-shot: the scene has point lights, which only the first shot can handle (a point has no area to emit from inside the iteration); drop --no-first-shot or replace them by small area lights".into(),
+        ));
+    }
+    Ok(())
+}
+
 /// Checks, before any GPU work, that the scene and image fit the device's limits.
 pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOptions) -> Result<()> {
     let binding = limits.max_storage_buffer_binding_size as u64;
@@ -132,12 +144,8 @@ fn milliseconds(since: Instant) -> f64 {
 /// Renders `scene` (already tessellated into `patches`) on `ctx`.
 pub fn render(ctx: &Context, scene: &Scene, patches: &Patches, options: &RenderOptions) -> Result<Rendered> {
     let start = Instant::now();
+    check_options(scene, options)?;
     check_limits(&ctx.limits(), patches, options)?;
-    if !options.first_shot && scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Point { .. })) {
-        return Err(Error::Usage(
-            "--no-first-shot: the scene has point lights, which only the first shot can handle (a point has no area to emit from inside the iteration); drop --no-first-shot or replace them by small area lights".into(),
-        ));
-    }
     let device = &ctx.device;
     let upload = Instant::now();
     let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
