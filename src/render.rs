@@ -106,7 +106,7 @@ pub fn check_options(scene: &Scene, options: &RenderOptions) -> Result<()> {
 
 /// Checks, before any GPU work, that the scene and image fit the device's limits.
 pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOptions) -> Result<()> {
-    let binding = limits.max_storage_buffer_binding_size as u64;
+    let binding = limits.max_storage_buffer_binding_size;
     let buffer = limits.max_buffer_size;
     let fit = |what: &str, bytes: u64, hint: &str| -> Result<()> {
         if bytes > binding.min(buffer) {
@@ -134,6 +134,25 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
         )));
     }
     fit("the image", options.width as u64 * options.height as u64 * 16, "use a smaller --width/--height")?;
+    // The stages check these too, but only once the first shot (or the first shot and the
+    // bundle buffers) exist: here they are refused before any GPU work, and the bundle's
+    // line table, which no stage checked, cannot reach wgpu as a validation panic.
+    if options.first_shot && options.hemicube_resolution > max_dim {
+        return Err(Error::Limits(format!(
+            "--hemicube-resolution {} exceeds the device's largest texture side {max_dim}; use a smaller --hemicube-resolution",
+            options.hemicube_resolution
+        )));
+    }
+    if options.iterations > 0 {
+        let r = options.bundle_resolution;
+        if !(crate::iteration::MIN_BUNDLE_RESOLUTION..=max_dim).contains(&r) {
+            return Err(Error::Limits(format!(
+                "--bundle-resolution {r}: expected {} to {max_dim} (the device's largest texture side)",
+                crate::iteration::MIN_BUNDLE_RESOLUTION
+            )));
+        }
+        fit("the ray-bundle line table", crate::iteration::line_table_bytes(r), "use a smaller --bundle-resolution")?;
+    }
     Ok(())
 }
 
