@@ -228,7 +228,9 @@ fn test01_wgsl_brdf_matches_the_host() {
             let allowed = RELATIVE * h.abs() + floor + spread[c];
             is_tight &= spread[c] <= RELATIVE * h.abs() + floor;
             worst[q.material as usize] = worst[q.material as usize].max((g - h).abs() / allowed);
-            if !((g - h).abs() <= allowed) {
+            // Written so that a NaN from either side fails.
+            let agrees = (g - h).abs() <= allowed;
+            if !agrees {
                 failures.push(format!(
                     "m{} {:?} {} channel {c}: gpu {g:e} host {h:e} (allowed +-{allowed:e}); n {} w_in {} w_out {}",
                     q.material, kind, case.what, q.normal, q.w_in, q.w_out

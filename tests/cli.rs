@@ -356,3 +356,20 @@ fn test06_compare() {
     assert!(stderr(&o).contains("missing.exr"), "{}", stderr(&o));
     assert_eq!(listing(&scratch.0), ["a.exr", "b.exr", "small.exr"], "compare writes nothing");
 }
+
+/// A bundle projection whose line table no buffer of the device holds: refused by
+/// `check_limits` (exit 2), where it used to reach wgpu as a validation panic (exit 101) on
+/// scenes small enough to pass the fragment bound.
+#[test]
+fn test07_bundle_resolution_beyond_the_buffers_is_a_limits_error() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let scratch = Scratch::new("bundle-limit");
+    let scene = scratch.dir("scene").join("small.toml");
+    std::fs::write(&scene, MINIMAL).expect("write the scene");
+    let path = scene.display().to_string();
+    let args = [path.as_str(), "--iterations", "1", "--bundle-resolution", "16384", "--quiet"];
+    let err = refused_render(&scratch, &args, "x.exr");
+    assert!(err.contains("--bundle-resolution"), "{err}");
+}
