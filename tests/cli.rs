@@ -120,10 +120,9 @@ fn refused_render(scratch: &Scratch, args: &[&str], out: &str) -> String {
     let mut all = args.to_vec();
     all.extend_from_slice(&["--out", &exr, "--stats", &stats]);
     let o = firstshot_in(&dir, &all);
-    let out = dir;
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{all:?}: expected exit status 2; stderr:\n{err}");
-    assert_eq!(listing(&out), Vec::<String>::new(), "{all:?} wrote files; stderr:\n{err}");
+    assert_eq!(listing(&dir), Vec::<String>::new(), "{all:?} wrote files; stderr:\n{err}");
     assert_eq!(stdout(&o), "", "{all:?} printed to stdout");
     err
 }
@@ -156,7 +155,12 @@ fn test01_scene_refusals_exit_2_name_file_and_key_and_write_nothing() {
     let cases: Vec<(&str, String, &str, &str)> = vec![
         ("unknown key", format!("colour = 1\n{MINIMAL}"), "colour", "unknown key"),
         ("missing [camera]", no_camera, "camera", "required"),
-        ("negative colour", edited(&[("albedo = [0.5, 0.5, 0.5]", "albedo = [0.5, -0.5, 0.5]")]), "albedo", ">= 0"),
+        (
+            "negative colour",
+            edited(&[("albedo = [0.5, 0.5, 0.5]", "albedo = [0.5, -0.5, 0.5]")]),
+            "materials.white.albedo",
+            ">= 0",
+        ),
         ("nan", edited(&[("position = [0, 1, -5]", "position = [0, nan, -5]")]), "camera.position[1]", "finite"),
         ("inf", edited(&[("power = [10, 10, 10]", "power = [inf, 10, 10]")]), "lights[0].power[0]", "finite"),
         ("unknown material", edited(&[("material = \"white\"", "material = \"whte\"")]), "shapes[0].material", "whte"),
