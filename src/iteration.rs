@@ -45,6 +45,16 @@ pub fn bundle_of_step(seed: u64, step: u64, centre: DVec3, radius: f64, resoluti
     (bundle, rng)
 }
 
+/// The smallest bundle resolution: a projection keeps a pixel of margin on each side of the
+/// scene's bounding sphere (the r - 2 of `fragment_bound`).
+pub const MIN_BUNDLE_RESOLUTION: u32 = 4;
+
+/// Bytes of the largest per-line buffers of a step (counts and offsets: a u32 per line of
+/// the projection, and the total).
+pub fn line_table_bytes(resolution: u32) -> u64 {
+    4 * (resolution as u64 * resolution as u64 + 1)
+}
+
 /// Fragments a step can produce at most: a triangle's projection holds at most
 /// area / dP + perimeter / pixel + 1 pixel centres, and projection only shrinks both.
 pub fn fragment_bound(patches: &Patches, radius: f64, resolution: u32) -> u64 {
@@ -82,13 +92,20 @@ impl Iteration {
     pub fn new(ctx: &Context, scene: &SceneBuffers, resolution: u32, capacity: u64) -> Result<Self> {
         let device = &ctx.device;
         let limits = ctx.limits();
-        if resolution < 4 || resolution > limits.max_texture_dimension_2d {
+        if resolution < MIN_BUNDLE_RESOLUTION || resolution > limits.max_texture_dimension_2d {
             return Err(Error::Limits(format!(
-                "--bundle-resolution {resolution}: expected 4 to {} (the device's largest texture side)",
+                "--bundle-resolution {resolution}: expected {MIN_BUNDLE_RESOLUTION} to {} (the device's largest texture side)",
                 limits.max_texture_dimension_2d
             )));
         }
-        let max = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size) / 8;
+        let largest = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        if line_table_bytes(resolution) > largest {
+            return Err(Error::Limits(format!(
+                "--bundle-resolution {resolution}: the line table needs {} bytes in one buffer, the device allows {largest}; use a smaller --bundle-resolution",
+                line_table_bytes(resolution)
+            )));
+        }
+        let max = largest / 8;
         if capacity > max {
             return Err(Error::Limits(format!(
                 "a bundle step may need {capacity} fragments, more than one buffer of this device holds ({max}); use a smaller --bundle-resolution or a larger --patch-size"

@@ -52,7 +52,7 @@ struct RenderArgs {
     iterations: Option<u32>,
     /// Stop the iteration after this much wall time (whichever of --iterations and --time
     /// comes first).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     time: Option<f64>,
     /// Solve the area lights as emitters inside the iteration instead of first shot.
     #[arg(long)]
@@ -64,7 +64,9 @@ struct RenderArgs {
     #[arg(long, value_name = "N")]
     seed: Option<u64>,
     /// Longest patch edge after tessellation (scene units).
-    #[arg(long, value_name = "X")]
+    // `allow_negative_numbers` (here and on --time): `-1` reaches run()'s range check and its
+    // message, instead of clap's "unexpected argument '-1'".
+    #[arg(long, value_name = "X", allow_negative_numbers = true)]
     patch_size: Option<f64>,
     /// Pixels along a full cube-face edge of the first shot's item buffers.
     #[arg(long, value_name = "R")]
@@ -340,6 +342,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     options.hemicube_resolution = args.hemicube_resolution.unwrap_or(options.hemicube_resolution);
     options.bundle_resolution = args.bundle_resolution.unwrap_or(options.bundle_resolution);
     let (exr_path, png_path) = output_paths(&args, &scene_path)?;
+    firstshot::render::check_options(&scene, &options)?;
     say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
 
     let t = Instant::now();

@@ -142,9 +142,21 @@ pub fn fingerprint(scene: &Scene, options: &RenderOptions) -> u64 {
     crate::checkpoint::fnv1a(format!("{scene:?}\n{options:?}").as_bytes())
 }
 
+/// Checks, before any GPU work, that `options` can be honoured for `scene`: `main.rs` calls
+/// it before opening an adapter, so that such a refusal is a usage error (exit 2) even on a
+/// machine without one.
+pub fn check_options(scene: &Scene, options: &RenderOptions) -> Result<()> {
+    if !options.first_shot && scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Point { .. })) {
+        return Err(Error::Usage(
+            "--no-first-shot: the scene has point lights, which only the first shot can handle (a point has no area to emit from inside the iteration); drop --no-first-shot or replace them by small area lights".into(),
+        ));
+    }
+    Ok(())
+}
+
 /// Checks, before any GPU work, that the scene and image fit the device's limits.
 pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOptions) -> Result<()> {
-    let binding = limits.max_storage_buffer_binding_size as u64;
+    let binding = limits.max_storage_buffer_binding_size;
     let buffer = limits.max_buffer_size;
     let fit = |what: &str, bytes: u64, hint: &str| -> Result<()> {
         if bytes > binding.min(buffer) {
@@ -172,6 +184,25 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
         )));
     }
     fit("the image", options.width as u64 * options.height as u64 * 16, "use a smaller --width/--height")?;
+    // The stages check these too, but only once the first shot (or the first shot and the
+    // bundle buffers) exist: here they are refused before any GPU work, and the bundle's
+    // line table, which no stage checked, cannot reach wgpu as a validation panic.
+    if options.first_shot && options.hemicube_resolution > max_dim {
+        return Err(Error::Limits(format!(
+            "--hemicube-resolution {} exceeds the device's largest texture side {max_dim}; use a smaller --hemicube-resolution",
+            options.hemicube_resolution
+        )));
+    }
+    if options.iterations > 0 {
+        let r = options.bundle_resolution;
+        if !(crate::iteration::MIN_BUNDLE_RESOLUTION..=max_dim).contains(&r) {
+            return Err(Error::Limits(format!(
+                "--bundle-resolution {r}: expected {} to {max_dim} (the device's largest texture side)",
+                crate::iteration::MIN_BUNDLE_RESOLUTION
+            )));
+        }
+        fit("the ray-bundle line table", crate::iteration::line_table_bytes(r), "use a smaller --bundle-resolution")?;
+    }
     Ok(())
 }
 
@@ -194,12 +225,8 @@ pub fn render_with(
     hooks: &mut dyn Hooks,
 ) -> Result<Rendered> {
     let start = Instant::now();
+    check_options(scene, options)?;
     check_limits(&ctx.limits(), patches, options)?;
-    if !options.first_shot && scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Point { .. })) {
-        return Err(Error::Usage(
-            "--no-first-shot: the scene has point lights, which only the first shot can handle (a point has no area to emit from inside the iteration); drop --no-first-shot or replace them by small area lights".into(),
-        ));
-    }
     let device = &ctx.device;
     let upload = Instant::now();
     let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);

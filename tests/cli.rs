@@ -1,0 +1,379 @@
+//! The `firstshot` binary against CLI.md: exit statuses, what is (and is not) written, the
+//! `--stats` keys, `--list-adapters` and `compare`. Each test runs the built binary in a
+//! temporary folder of its own.
+
+mod common;
+
+use firstshot::image::Image;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_firstshot");
+
+/// A fresh, empty folder under the system temp folder, removed when dropped.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(test: &str) -> Scratch {
+        let dir = std::env::temp_dir().join(format!("firstshot-cli-{}-{test}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp folder");
+        Scratch(dir)
+    }
+
+    /// A sub-folder, created empty.
+    fn dir(&self, name: &str) -> PathBuf {
+        let dir = self.0.join(name);
+        std::fs::create_dir_all(&dir).expect("temp sub-folder");
+        dir
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Runs the binary in `cwd`, where a default output path (the scene's stem) would land.
+fn firstshot_in(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(BIN).args(args).current_dir(cwd).output().expect("running the firstshot binary")
+}
+
+fn firstshot(args: &[&str]) -> Output {
+    firstshot_in(&std::env::temp_dir(), args)
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Every path under `dir`, relative to it, sorted.
+fn listing(dir: &Path) -> Vec<String> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<String>) {
+        for entry in std::fs::read_dir(dir).expect("read_dir") {
+            let path = entry.expect("dir entry").path();
+            out.push(path.strip_prefix(root).expect("under root").display().to_string());
+            if path.is_dir() {
+                walk(root, &path, out);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
+}
+
+fn cornell_box() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.toml").display().to_string()
+}
+
+/// A small valid scene: one floor quad and one white material, lit by a point light.
+const MINIMAL: &str = r#"
+format = 1
+
+[camera]
+position = [0, 1, -5]
+look_at = [0, 1, 0]
+up = [0, 1, 0]
+fov_y = 40
+width = 16
+height = 16
+
+[materials.white]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+
+[[shapes]]
+type = "quad"
+vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, 1], [1, 0, -1]]
+material = "white"
+
+[[lights]]
+type = "point"
+position = [0, 3, 0]
+power = [10, 10, 10]
+"#;
+
+/// MINIMAL with each `(from, to)` replaced once (each `from` must occur).
+fn edited(edits: &[(&str, &str)]) -> String {
+    let mut text = MINIMAL.to_string();
+    for (from, to) in edits {
+        assert!(text.contains(from), "{from:?} is not in the scene");
+        text = text.replacen(from, to, 1);
+    }
+    text
+}
+
+/// Runs `args` with `--out <empty folder>/<out> --stats <empty folder>/s.json`, in that
+/// folder, and checks a refusal: exit status 2, nothing written, nothing on stdout. Returns
+/// stderr.
+fn refused_render(scratch: &Scratch, args: &[&str], out: &str) -> String {
+    let dir = scratch.dir("out");
+    let exr = dir.join(out).display().to_string();
+    let stats = dir.join("s.json").display().to_string();
+    let mut all = args.to_vec();
+    all.extend_from_slice(&["--out", &exr, "--stats", &stats]);
+    let o = firstshot_in(&dir, &all);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{all:?}: expected exit status 2; stderr:\n{err}");
+    assert_eq!(listing(&dir), Vec::<String>::new(), "{all:?} wrote files; stderr:\n{err}");
+    assert_eq!(stdout(&o), "", "{all:?} printed to stdout");
+    err
+}
+
+/// Asserts that `err` is one line that names `file` and `key`.
+fn one_line_naming(err: &str, file: &Path, key: &str) {
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "stderr is not one line:\n{err}");
+    assert!(err.contains(&file.display().to_string()), "stderr does not name {}: {err}", file.display());
+    assert!(err.contains(key), "stderr does not name the key {key:?}: {err}");
+}
+
+#[test]
+fn test01_scene_refusals_exit_2_name_file_and_key_and_write_nothing() {
+    let scratch = Scratch::new("scene-refusals");
+    let area_light = "[[lights]]\ntype = \"area\"\nvertices = [[0, 2, 0], [1, 2, 0], [1, 2.5, 1], [0, 2, 1]]\n\
+                      radiance = [1, 1, 1]\n";
+    let sierpinski = "[[shapes]]\ntype = \"sierpinski\"\ncenter = [0, 0, 0]\nsize = 1\nlevel = 50\n\
+                      material = \"white\"\n";
+    let hot = "[materials.hot]\ntype = \"phong\"\ndiffuse = [0, 0, 0]\nspecular = [1, 1, 1]\nshininess = 3\n";
+    let mesh = "[[shapes]]\ntype = \"mesh\"\nfile = \"meshes/nowhere.obj\"\nmaterial = \"white\"\n\n[[shapes]]";
+    let no_lights = MINIMAL.split("[[lights]]").next().expect("MINIMAL has lights").to_string();
+    let no_shapes = MINIMAL.split("[[shapes]]").next().expect("MINIMAL has shapes").to_string()
+        + "[[lights]]\ntype = \"point\"\nposition = [0, 3, 0]\npower = [10, 10, 10]\n";
+    let no_camera = {
+        let (head, rest) = MINIMAL.split_once("[camera]").expect("MINIMAL has a camera");
+        head.to_string() + &rest[rest.find("[materials").expect("materials follow the camera")..]
+    };
+    // (what, scene text, key, a part of the message)
+    let cases: Vec<(&str, String, &str, &str)> = vec![
+        ("unknown key", format!("colour = 1\n{MINIMAL}"), "colour", "unknown key"),
+        ("missing [camera]", no_camera, "camera", "required"),
+        (
+            "negative colour",
+            edited(&[("albedo = [0.5, 0.5, 0.5]", "albedo = [0.5, -0.5, 0.5]")]),
+            "materials.white.albedo",
+            ">= 0",
+        ),
+        ("nan", edited(&[("position = [0, 1, -5]", "position = [0, nan, -5]")]), "camera.position[1]", "finite"),
+        ("inf", edited(&[("power = [10, 10, 10]", "power = [inf, 10, 10]")]), "lights[0].power[0]", "finite"),
+        ("unknown material", edited(&[("material = \"white\"", "material = \"whte\"")]), "shapes[0].material", "whte"),
+        ("missing mesh file", edited(&[("[[shapes]]", mesh)]), "shapes[0].file", "nowhere.obj"),
+        (
+            "degenerate quad",
+            edited(&[("[1, 0, 1], [1, 0, -1]]", "[1, 0, 1], [1, 0, 1]]")]),
+            "shapes[0].vertices",
+            "zero area",
+        ),
+        ("non-planar area light", format!("{MINIMAL}\n{area_light}"), "lights[1].vertices", "not planar"),
+        ("no emitter", no_lights, "lights", "no emitter"),
+        ("no surfaces", no_shapes, "shapes", "no surfaces"),
+        ("sierpinski level 50", format!("{MINIMAL}\n{sierpinski}"), "shapes[1].level", "50"),
+        // ks = 1, n = 3 reflects 2 pi / 5 = 1.2566 at normal incidence (brdf.rs test09).
+        ("energy-gaining phong", format!("{MINIMAL}\n{hot}"), "materials.hot", "1.256"),
+    ];
+    for (what, text, key, part) in cases {
+        let scene = scratch.dir("scene").join(format!("{}.toml", what.replace(' ', "_")));
+        std::fs::write(&scene, text).expect("write the scene");
+        let err = refused_render(&scratch, &[&scene.display().to_string()], "x.exr");
+        one_line_naming(&err, &scene, key);
+        assert!(err.contains(part), "{what}: stderr lacks {part:?}: {err}");
+    }
+}
+
+#[test]
+fn test02_usage_errors_exit_2_and_write_nothing() {
+    let scratch = Scratch::new("usage");
+    let cb = cornell_box();
+    let png = refused_render(&scratch, &[&cb], "x.png");
+    assert!(png.contains("--out") && png.contains(".exr"), "{png}");
+    for (args, part) in [
+        (vec!["--width", "0"], "--width"),
+        (vec!["--height", "16385"], "--height"),
+        (vec!["--patch-size", "-1"], "--patch-size -1: expected a finite number > 0"),
+        (vec!["--patch-size", "nan"], "--patch-size"),
+        (vec!["--time", "0"], "--time"),
+        (vec!["--time", "-3"], "--time"),
+        (vec!["--light-window", "cube"], "--light-window"),
+    ] {
+        let err = refused_render(&scratch, &[&[cb.as_str()], &args[..]].concat(), "x.exr");
+        assert!(err.contains(part), "{args:?}: stderr lacks {part:?}: {err}");
+        // Flags are checked before the (default, non-quiet) progress output begins.
+        assert!(!err.contains("loaded"), "{args:?}: progress before the refusal: {err}");
+    }
+    let unknown = refused_render(&scratch, &[&cb, "--bogus"], "x.exr");
+    assert!(unknown.contains("--bogus"), "{unknown}");
+    let missing = refused_render(&scratch, &[], "x.exr");
+    assert!(missing.to_lowercase().contains("scene"), "{missing}");
+}
+
+/// A point light cannot be an emitter inside the iteration (SCENE_FORMAT.md, area lights):
+/// refused as a usage error before any adapter is opened, so the refusal is the same on a
+/// machine without a GPU.
+#[test]
+fn test03_no_first_shot_with_a_point_light_is_a_usage_error() {
+    let scratch = Scratch::new("no-first-shot");
+    let scene = scratch.dir("scene").join("point.toml");
+    std::fs::write(&scene, MINIMAL).expect("write the scene");
+    let err = refused_render(&scratch, &[&scene.display().to_string(), "--no-first-shot"], "x.exr");
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "stderr is not one line (did an adapter get opened?):\n{err}");
+    assert!(err.contains("--no-first-shot") && err.contains("point light"), "{err}");
+}
+
+/// The stats keys of CLI.md.
+const STATS_KEYS: [&str; 12] = [
+    "adapter",
+    "patches",
+    "light_samples",
+    "image",
+    "hemicube_resolution",
+    "bundle_resolution",
+    "first_shot",
+    "first_shot_ms",
+    "iterations",
+    "iteration_ms_median",
+    "total_ms",
+    "seed",
+];
+
+#[test]
+fn test04_tiny_render_writes_exr_png_and_stats() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let scratch = Scratch::new("render");
+    let exr = scratch.0.join("sub/dir/cb.exr");
+    let stats = scratch.0.join("s.json");
+    let o = firstshot(&[
+        &cornell_box(),
+        "--iterations",
+        "0",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--hemicube-resolution",
+        "64",
+        "--out",
+        &exr.display().to_string(),
+        "--stats",
+        &stats.display().to_string(),
+        "--quiet",
+    ]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(0), "stderr:\n{err}");
+    assert_eq!(stdout(&o), "", "--quiet prints nothing");
+    // Exactly the outputs: the missing folders made, no temporary file left beside them.
+    assert_eq!(listing(&scratch.0), ["s.json", "sub", "sub/dir", "sub/dir/cb.exr", "sub/dir/cb.png"]);
+
+    let image = Image::read_exr(&exr).expect("cb.exr reads back");
+    assert_eq!((image.width, image.height), (32, 32));
+    assert!(image.pixels.iter().flatten().all(|v| v.is_finite() && *v >= 0.0), "finite, non-negative radiance");
+    assert!(image.mean().iter().all(|&m| m > 0.0), "the lit box is not black: {:?}", image.mean());
+
+    let png = std::fs::File::open(exr.with_extension("png")).expect("cb.png");
+    let reader = png::Decoder::new(std::io::BufReader::new(png)).read_info().expect("cb.png decodes");
+    assert_eq!((reader.info().width, reader.info().height), (32, 32));
+
+    let text = std::fs::read_to_string(&stats).expect("s.json");
+    let json: serde_json::Value = serde_json::from_str(&text).expect("s.json is JSON");
+    for key in STATS_KEYS {
+        assert!(json.get(key).is_some(), "stats lack {key:?}:\n{text}");
+    }
+    for key in ["name", "backend", "device_type"] {
+        assert!(json["adapter"][key].as_str().is_some_and(|s| !s.is_empty()), "adapter.{key}:\n{text}");
+    }
+    assert_eq!(json["image"], serde_json::json!([32, 32]));
+    assert_eq!(json["hemicube_resolution"], 64);
+    // From the scene's [settings]: bundle_resolution 512, seed 1; 2 x 2 light cells give 9 samples.
+    assert_eq!(json["bundle_resolution"], 512);
+    assert_eq!(json["seed"], 1);
+    assert_eq!(json["light_samples"], 9);
+    assert_eq!(json["first_shot"], true);
+    assert_eq!(json["iterations"], 0);
+    assert!(json["patches"].as_u64().is_some_and(|n| n > 0), "{text}");
+    for key in ["first_shot_ms", "iteration_ms_median", "total_ms"] {
+        assert!(json[key].as_f64().is_some_and(|ms| ms >= 0.0), "{key}:\n{text}");
+    }
+}
+
+/// wgpu's names of its backends (`wgpu::Backend`'s Debug form).
+const BACKENDS: [&str; 6] = ["Vulkan", "Metal", "Dx12", "Gl", "BrowserWebGpu", "Noop"];
+
+#[test]
+fn test05_list_adapters() {
+    let o = firstshot(&["--list-adapters"]);
+    assert_eq!(o.status.code(), Some(0), "stderr:\n{}", stderr(&o));
+    let out = stdout(&o);
+    // One adapter per line: name, backend, type, driver, separated by tabs.
+    let backends: Vec<&str> = out.lines().filter_map(|l| l.split('\t').nth(1)).collect();
+    let required = std::env::var("FIRSTSHOT_REQUIRE_GPU").is_ok_and(|v| v == "1");
+    if backends.is_empty() && !required {
+        eprintln!("SKIPPED (no GPU adapter): --list-adapters printed {out:?}");
+        return;
+    }
+    assert!(backends.iter().any(|b| BACKENDS.contains(b)), "no line names a backend:\n{out}");
+    if required {
+        // CI (README) runs on lavapipe: Vulkan unless FIRSTSHOT_REQUIRE_BACKEND says otherwise.
+        let backend = std::env::var("FIRSTSHOT_REQUIRE_BACKEND").unwrap_or_else(|_| "vulkan".into());
+        assert!(backends.iter().any(|b| b.eq_ignore_ascii_case(&backend)), "no {backend} adapter listed:\n{out}");
+    }
+}
+
+fn write_exr(path: &Path, width: u32, height: u32, value: [f32; 3]) {
+    Image::new(width, height, vec![value; (width * height) as usize]).write_exr(path, &[]).expect("write an EXR");
+}
+
+#[test]
+fn test06_compare() {
+    let scratch = Scratch::new("compare");
+    let path = |name: &str| scratch.0.join(name).display().to_string();
+    write_exr(&scratch.0.join("a.exr"), 8, 6, [0.55, 0.22, 1.1]);
+    write_exr(&scratch.0.join("b.exr"), 8, 6, [0.5, 0.2, 1.0]);
+    write_exr(&scratch.0.join("small.exr"), 4, 6, [0.5, 0.2, 1.0]);
+
+    let o = firstshot(&["compare", &path("a.exr"), &path("b.exr")]);
+    assert_eq!(o.status.code(), Some(0), "stderr:\n{}", stderr(&o));
+    let out = stdout(&o);
+    let rmse: f64 = out
+        .lines()
+        .find_map(|l| l.strip_prefix("relative RMSE"))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no relative RMSE line:\n{out}"));
+    // A is B times 1.1 everywhere: the relative RMSE is 0.1, printed to 5 decimals.
+    assert!((rmse - 0.1).abs() <= 0.5e-5, "{rmse}");
+
+    let o = firstshot(&["compare", &path("a.exr"), &path("small.exr")]);
+    assert_ne!(o.status.code(), Some(0));
+    let err = stderr(&o);
+    assert!(err.contains("differ in size") && err.contains("8x6") && err.contains("4x6"), "{err}");
+
+    let o = firstshot(&["compare", &path("a.exr"), &path("missing.exr")]);
+    assert_ne!(o.status.code(), Some(0));
+    assert!(stderr(&o).contains("missing.exr"), "{}", stderr(&o));
+    assert_eq!(listing(&scratch.0), ["a.exr", "b.exr", "small.exr"], "compare writes nothing");
+}
+
+/// A bundle projection whose line table no buffer of the device holds: refused by
+/// `check_limits` (exit 2), where it used to reach wgpu as a validation panic (exit 101) on
+/// scenes small enough to pass the fragment bound.
+#[test]
+fn test07_bundle_resolution_beyond_the_buffers_is_a_limits_error() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let scratch = Scratch::new("bundle-limit");
+    let scene = scratch.dir("scene").join("small.toml");
+    std::fs::write(&scene, MINIMAL).expect("write the scene");
+    let path = scene.display().to_string();
+    let args = [path.as_str(), "--iterations", "1", "--bundle-resolution", "16384", "--quiet"];
+    let err = refused_render(&scratch, &args, "x.exr");
+    assert!(err.contains("--bundle-resolution"), "{err}");
+}
