@@ -113,3 +113,21 @@ fn test03_unwritable_output_fails_with_status_1_before_any_work() {
     assert!(!stderr.contains("adapter:"), "no GPU work before the check: {stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn test04_gpu_errors_become_errors_not_aborts() {
+    let Some(ctx) = common::gpu() else { return };
+    // A buffer both mappable for reading and a storage buffer is invalid: wgpu reports it
+    // asynchronously; the context must hand it back as an error, not abort the process.
+    let _bad = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("firstshot.test.invalid"),
+        size: 16,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    });
+    let err = ctx.wait().expect_err("the invalid buffer must be reported");
+    assert!(matches!(err, firstshot::Error::Gpu(_)), "{err}");
+    assert!(err.to_string().contains("firstshot.test.invalid"), "the message names the resource: {err}");
+    // Reported once: the context is usable again.
+    ctx.wait().unwrap();
+}

@@ -10,9 +10,10 @@ use super::{Light, Rgb, Scene, Triangle};
 use crate::{Error, Result};
 use glam::DVec3;
 
-/// The most patches a tessellation may produce. Beyond it the per-patch GPU buffers of a
-/// few words each pass a gigabyte, and ids would crowd the 32-bit item buffers.
-pub const MAX_PATCHES: u64 = 1 << 27;
+/// The most patches a tessellation may produce (33 million). Each costs about 150 bytes on
+/// the host and 200 on the GPU, so beyond it a scene outgrows the memory of the machines
+/// this runs on before any device limit is met; refusing early beats being killed.
+pub const MAX_PATCHES: u64 = 1 << 25;
 
 /// What a patch is part of.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,0 +1,105 @@
+//! Hostile input: each a clear refusal or a working render, never a panic or an abort.
+
+mod common;
+
+use firstshot::scene;
+use std::path::PathBuf;
+use std::process::Command;
+
+const BIN: &str = env!("CARGO_BIN_EXE_firstshot");
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("firstshot-hostile-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+const HEAD: &str = r#"format = 1
+[camera]
+position = [0.5, 0.5, 3.0]
+look_at = [0.5, 0.5, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y = 50.0
+width = 24
+height = 24
+[materials.white]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+"#;
+
+#[test]
+fn test01_million_vertex_mesh_loads_and_tessellates() {
+    let dir = scratch("mesh");
+    // A 1000 x 1000 vertex grid: a million vertices, two million triangles.
+    let n = 1000;
+    let mut obj = String::with_capacity(40 * n * n);
+    for j in 0..n {
+        for i in 0..n {
+            obj.push_str(&format!("v {} {} 0\n", i as f64 / (n - 1) as f64, j as f64 / (n - 1) as f64));
+        }
+    }
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let a = j * n + i + 1;
+            obj.push_str(&format!("f {} {} {} {}\n", a, a + 1, a + n + 1, a + n));
+        }
+    }
+    std::fs::write(dir.join("grid.obj"), obj).unwrap();
+    let text = format!(
+        "{HEAD}[[shapes]]\ntype = \"mesh\"\nfile = \"grid.obj\"\nmaterial = \"white\"\nemission = [1.0, 1.0, 1.0]\n"
+    );
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, text).unwrap();
+    let scene = scene::load(&path).unwrap();
+    let patches = scene::tessellate(&scene, 1.0).unwrap();
+    assert_eq!(patches.patches.len(), 2 * (n - 1) * (n - 1));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Runs the binary on a scene; it must exit 0 (rendered) or 2 (refused), never crash.
+fn survives(name: &str, shapes: &str, extra: &[&str]) -> (i32, String) {
+    let dir = scratch(name);
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, format!("{HEAD}{shapes}")).unwrap();
+    let out = Command::new(BIN)
+        .arg(&path)
+        .args(["--quiet", "--iterations", "3", "--bundle-resolution", "32", "--hemicube-resolution", "32"])
+        .args(extra)
+        .arg("--out")
+        .arg(dir.join("x.exr"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    let code = out.status.code().unwrap_or(-1);
+    assert!(code == 0 || code == 2, "{name}: exit {code} (a crash?): {stderr}");
+    assert!(!stderr.contains("panicked"), "{name}: {stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+    (code, stderr)
+}
+
+#[test]
+fn test02_extreme_numbers_render_or_are_refused() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let quad = |scale: &str| {
+        format!(
+            "[[shapes]]\ntype = \"quad\"\nvertices = [[0,0,0],[{s},0,0],[{s},{s},0],[0,{s},0]]\nmaterial = \"white\"\nemission = [1,1,1]\n",
+            s = scale
+        )
+    };
+    survives("huge", &quad("1e30"), &[]);
+    survives("tiny", &quad("1e-30"), &[]);
+    survives("huge-emission", &quad("1").replace("emission = [1,1,1]", "emission = [3e38, 3e38, 3e38]"), &[]);
+    let (code, _) = survives(
+        "level50",
+        "[[shapes]]\ntype = \"sierpinski\"\nlevel = 50\nmaterial = \"white\"\nemission = [1,1,1]\n",
+        &[],
+    );
+    assert_eq!(code, 2);
+    let (code, _) = survives("zero-width", &quad("1"), &["--width", "0"]);
+    assert_eq!(code, 2);
+    let (code, stderr) = survives("too-many-patches", &quad("1"), &["--patch-size", "1e-5"]);
+    assert_eq!(code, 2, "{stderr}");
+}
