@@ -15,7 +15,8 @@ pub enum AdapterChoice {
     Cpu,
     /// Any hardware adapter (discrete, integrated or virtual).
     Gpu,
-    /// The first adapter (in `Auto` order) whose name contains this, case-insensitively.
+    /// The first adapter (in `Auto` order) whose name contains this, case-insensitively, or
+    /// whose backend it names.
     Name(String),
 }
 
@@ -122,7 +123,12 @@ fn matches(choice: &AdapterChoice, info: &wgpu::AdapterInfo) -> bool {
             info.device_type,
             wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu | wgpu::DeviceType::VirtualGpu
         ),
-        AdapterChoice::Name(part) => info.name.to_lowercase().contains(&part.to_lowercase()),
+        // A backend name (vulkan, gl, metal, dx12) also selects: lavapipe and llvmpipe share
+        // a name and differ only in their backend.
+        AdapterChoice::Name(part) => {
+            let part = part.to_lowercase();
+            info.name.to_lowercase().contains(&part) || format!("{:?}", info.backend).to_lowercase() == part
+        }
     }
 }
 
