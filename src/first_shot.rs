@@ -140,7 +140,7 @@ pub fn run(
     }
     let n = buffers.patch_count as u64;
     let samples = patches.samples.len() as u64;
-    let max_pairs = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size) / 16;
+    let max_pairs = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / 16;
     // Every pair fits when each patch sees every sample; start there when that is small,
     // else grow on overflow below.
     let mut capacity = (n * samples).clamp(1, 1 << 22).min(max_pairs) as u32;

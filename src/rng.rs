@@ -17,7 +17,7 @@ pub struct StepRng(Pcg32);
 
 impl StepRng {
     pub fn new(seed: u64, step: u64) -> Self {
-        StepRng(Pcg32::new(splitmix64(seed ^ splitmix64(step)), 0xa02b_dbf7_bb3c_0a7))
+        StepRng(Pcg32::new(splitmix64(seed ^ splitmix64(step)), 0x0a02_bdbf_7bb3_c0a7))
     }
 
     /// Uniform in [0, 1) with 24 random bits (exactly representable as f32).

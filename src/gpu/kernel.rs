@@ -69,18 +69,6 @@ pub fn validate(stem: &str) -> std::result::Result<naga::Module, String> {
     Ok(module)
 }
 
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn every_kernel_parses_and_validates() {
-        for (stem, _) in super::KERNELS {
-            if let Err(e) = super::validate(stem) {
-                panic!("wgsl/{stem}.wgsl does not validate:\n{e}");
-            }
-        }
-    }
-}
-
 /// A compute pipeline for entry point `entry` of kernel `stem` over explicit layouts.
 pub fn compute_pipeline(
     device: &wgpu::Device,
@@ -150,4 +138,16 @@ pub fn buffer_layout(
         })
         .collect();
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn every_kernel_parses_and_validates() {
+        for (stem, _) in super::KERNELS {
+            if let Err(e) = super::validate(stem) {
+                panic!("wgsl/{stem}.wgsl does not validate:\n{e}");
+            }
+        }
+    }
 }
