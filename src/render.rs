@@ -243,16 +243,7 @@ pub fn render_with(
     }
     // Built after the first shot: it binds the first-shot table.
     let estimate = ImageEstimate::new(device, &buffers, &camera);
-    ctx.queue.write_buffer(
-        &estimate.params,
-        0,
-        bytemuck::bytes_of(&GpuEstimateParams {
-            environment: [scene.environment[0], scene.environment[1], scene.environment[2], 0.0],
-            patch_count: buffers.patch_count,
-            use_state: 0,
-            _pad: [0; 2],
-        }),
-    );
+    estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, false);
 
     let image_start = Instant::now();
     let near = buffers.radius * 1e-5;
@@ -408,16 +399,7 @@ fn iterate(run: &Run, resume: Option<&Checkpoint>, hooks: &mut dyn Hooks) -> Res
     };
     let state_backup = backup(&buffers.state, "firstshot.render.state_backup");
     let image_backup = backup(&estimate.image_sum, "firstshot.render.image_backup");
-    ctx.queue.write_buffer(
-        &estimate.params,
-        0,
-        bytemuck::bytes_of(&GpuEstimateParams {
-            environment: [scene.environment[0], scene.environment[1], scene.environment[2], 0.0],
-            patch_count: buffers.patch_count,
-            use_state: 1,
-            _pad: [0; 2],
-        }),
-    );
+    estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, true);
     let mut batch_ms = Vec::new();
     let mut interrupted = false;
     while step < options.iterations && !interrupted {

@@ -4,7 +4,7 @@
 mod common;
 
 use firstshot::render::{RenderOptions, render};
-use firstshot::scene::{Camera, Patch, PatchKind, Patches, Scene, Settings};
+use firstshot::scene::{Camera, Patch, Patches, Scene, Settings};
 use glam::{DVec2, DVec3};
 
 fn scene(camera: Camera, environment: [f32; 3]) -> Scene {
@@ -20,16 +20,7 @@ fn scene(camera: Camera, environment: [f32; 3]) -> Scene {
 }
 
 fn patch(v: [DVec3; 3], emission: [f32; 3], twin: bool) -> Patch {
-    let c = (v[1] - v[0]).cross(v[2] - v[0]);
-    Patch {
-        vertices: v,
-        normal: c.normalize(),
-        area: 0.5 * c.length(),
-        material: None,
-        emission,
-        kind: PatchKind::Surface { surface: 0 },
-        twin,
-    }
+    Patch { emission, twin, ..common::patch(v) }
 }
 
 fn camera(position: DVec3, width: u32, height: u32) -> Camera {

@@ -140,6 +140,38 @@ pub fn buffer_layout(
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
 }
 
+/// Records one compute dispatch of `pipeline` over `groups` workgroups (x, y) in a pass
+/// labelled `label`, with `bind_groups` bound from group 0 on.
+pub fn dispatch(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    bind_groups: &[&wgpu::BindGroup],
+    groups: (u32, u32),
+) {
+    let mut pass =
+        encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+    pass.set_pipeline(pipeline);
+    for (i, group) in bind_groups.iter().enumerate() {
+        pass.set_bind_group(i as u32, *group, &[]);
+    }
+    pass.dispatch_workgroups(groups.0, groups.1, 1);
+}
+
+/// Bind-group layout entry of a `texture_2d<u32>` read by a compute shader (item buffers).
+pub fn uint_texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Uint,
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

@@ -35,13 +35,7 @@ impl BundleFinalize {
     }
 
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("firstshot.bundle_finalize.pass"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        let (x, y) = dispatch_size(self.patch_count.div_ceil(64));
-        pass.dispatch_workgroups(x, y, 1);
+        let groups = dispatch_size(self.patch_count.div_ceil(64));
+        kernel::dispatch(encoder, "firstshot.bundle_finalize.pass", &self.pipeline, &[&self.bind_group], groups);
     }
 }

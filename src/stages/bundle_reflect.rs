@@ -51,14 +51,8 @@ impl BundleReflect {
     }
 
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("firstshot.bundle_reflect.pass"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.set_bind_group(1, &self.table_group, &[]);
-        let (x, y) = dispatch_size(self.patch_count.div_ceil(64));
-        pass.dispatch_workgroups(x, y, 1);
+        let groups = dispatch_size(self.patch_count.div_ceil(64));
+        let bind_groups = [&self.bind_group, &self.table_group];
+        kernel::dispatch(encoder, "firstshot.bundle_reflect.pass", &self.pipeline, &bind_groups, groups);
     }
 }

@@ -37,13 +37,7 @@ impl BundleTransfer {
     }
 
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("firstshot.bundle_transfer.pass"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        let (x, y) = dispatch_size(self.lines.div_ceil(64));
-        pass.dispatch_workgroups(x, y, 1);
+        let groups = dispatch_size(self.lines.div_ceil(64));
+        kernel::dispatch(encoder, "firstshot.bundle_transfer.pass", &self.pipeline, &[&self.bind_group], groups);
     }
 }

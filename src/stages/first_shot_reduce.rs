@@ -36,16 +36,7 @@ impl FirstShotReduce {
             entries: &[
                 buffers::uniform_entry::<GpuCamera>(0, compute),
                 buffers::uniform_entry::<GpuFaceParams>(1, compute),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: compute,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                kernel::uint_texture_entry(2),
                 storage(3, true, std::mem::size_of::<GpuPatch>() as u64),
                 storage(4, true, std::mem::size_of::<GpuLightSample>() as u64),
                 storage(5, false, 8),
@@ -122,24 +113,19 @@ impl FirstShotReduce {
 
     /// Adds the weights of the face just rendered (its uniform and `face_params` written).
     pub fn record_face(&self, encoder: &mut wgpu::CommandEncoder, rows: u32) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("firstshot.first_shot_reduce.reduce_face"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.reduce);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.dispatch_workgroups(self.face_size[0].div_ceil(8), rows.div_ceil(8), 1);
+        let groups = (self.face_size[0].div_ceil(8), rows.div_ceil(8));
+        kernel::dispatch(encoder, "firstshot.first_shot_reduce.reduce_face", &self.reduce, &[&self.bind_group], groups);
     }
 
     /// Appends the sample's pairs (its `append_params` written) and clears the sums.
     pub fn record_append(&self, encoder: &mut wgpu::CommandEncoder) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("firstshot.first_shot_reduce.append_sample"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.append);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        let (x, y) = dispatch_size(self.patch_count.div_ceil(64));
-        pass.dispatch_workgroups(x, y, 1);
+        let groups = dispatch_size(self.patch_count.div_ceil(64));
+        kernel::dispatch(
+            encoder,
+            "firstshot.first_shot_reduce.append_sample",
+            &self.append,
+            &[&self.bind_group],
+            groups,
+        );
     }
 }

@@ -30,16 +30,7 @@ impl ImageEstimate {
             entries: &[
                 buffers::uniform_entry::<GpuCamera>(0, compute),
                 buffers::uniform_entry::<GpuEstimateParams>(1, compute),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: compute,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                kernel::uint_texture_entry(2),
                 storage(3, true, std::mem::size_of::<GpuPatch>() as u64),
                 storage(4, true, std::mem::size_of::<GpuMaterial>() as u64),
                 storage(5, true, std::mem::size_of::<GpuPatchState>() as u64),
@@ -99,14 +90,21 @@ impl ImageEstimate {
 
     /// Records one estimate of every pixel (reads the camera item buffer of this pass).
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("firstshot.image_estimate.pass"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.set_bind_group(1, &self.table_group, &[]);
-        pass.dispatch_workgroups(self.width.div_ceil(WORKGROUP), self.height.div_ceil(WORKGROUP), 1);
+        let groups = (self.width.div_ceil(WORKGROUP), self.height.div_ceil(WORKGROUP));
+        let bind_groups = [&self.bind_group, &self.table_group];
+        kernel::dispatch(encoder, "firstshot.image_estimate.pass", &self.pipeline, &bind_groups, groups);
+    }
+
+    /// What the estimate adds where no surface is, and whether the iteration state holds J
+    /// yet (before step 1 it does not).
+    pub fn set_params(&self, queue: &wgpu::Queue, environment: [f32; 3], patch_count: u32, use_state: bool) {
+        let params = GpuEstimateParams {
+            environment: [environment[0], environment[1], environment[2], 0.0],
+            patch_count,
+            use_state: use_state as u32,
+            _pad: [0; 2],
+        };
+        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
     }
 
     /// Clears the running sum.
