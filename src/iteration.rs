@@ -132,7 +132,7 @@ impl Iteration {
             reflect: BundleReflect::new(device, scene, &bundle, &outgoing, &max_bits),
             visibility: BundleVisibility::new(
                 device,
-                [&bundle, &counts, &offsets, &cursor, &fragments, &overflow],
+                [&bundle, &counts, &offsets, &cursor, &fragments, &overflow, &outgoing],
                 resolution,
             ),
             scan: PrefixSum::new(device, lines + 1, &counts, &offsets),

@@ -18,6 +18,8 @@ pub const VERTEX_TWIN_BIT: u32 = 1 << 31;
 /// Sums that must not depend on thread order are accumulated as exact 64-bit integers
 /// (two u32 atomics) of values in [0, 1] scaled by this.
 pub const FIXED_POINT_SCALE: f32 = 2147483648.0;
+/// Bundle fragments carry their patch's facing (front toward +d) in the top bit of the id.
+pub const FRAGMENT_FRONT_BIT: u32 = 1 << 31;
 /// The most patches a scene may have (ids must leave the twin bit free).
 pub const MAX_PATCHES: u32 = 1 << 27;
 
@@ -218,6 +220,7 @@ pub fn wgsl_constants() -> String {
          const PATCH_FIRST_SHOT_LIGHT: u32 = {PATCH_FIRST_SHOT_LIGHT}u;\n\
          const NO_PATCH: u32 = {NO_PATCH}u;\n\
          const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
+         const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
          const PI: f32 = {pi:?};\n\
          const FIXED_POINT_SCALE: f32 = {scale:?};\n",
         pi = std::f32::consts::PI,

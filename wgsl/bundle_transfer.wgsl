@@ -10,8 +10,8 @@
 //   0 bundle     uniform Bundle          read
 //   1 patches    array<Patch>            read
 //   2 offsets    array<u32>              read (line starts, resolution^2 + 1)
-//   3 fragments  array<vec2<u32>>        read_write (each line's slice sorted in place by
-//                                        its one invocation)
+//   3 fragments  array<vec2<u32>>        read_write (depth bits, patch | FRAGMENT_FRONT_BIT;
+//                                        each line's slice sorted in place by its invocation)
 //   4 outgoing   array<vec4<f32>>        read (O_j, s_j from bundle_reflect)
 //   5 sums       array<atomic<u32>>      read_write (6 per patch: lo, hi per channel)
 //   6 max_bits   array<u32>              read (largest radiance of the step)
@@ -32,18 +32,13 @@ fn transfer_scale(bits: u32) -> f32 {
 }
 
 // Sort key order: depth, then the surface facing -d first (back-to-back twins lie at the
-// same depth; this order lets each see past the other), then patch index.
+// same depth; this order lets each see past the other), then patch index. The facing bit
+// is the top bit of y, so the last two compare as one integer.
 fn before(a: vec2<u32>, b: vec2<u32>) -> bool {
     let da = bitcast<f32>(a.x);
     let db = bitcast<f32>(b.x);
     if (da != db) {
         return da < db;
-    }
-    let d = bundle.direction.xyz;
-    let sa = bundle_side(patches[a.y].normal.xyz, d);
-    let sb = bundle_side(patches[b.y].normal.xyz, d);
-    if (sa != sb) {
-        return sa < sb;
     }
     return a.y < b.y;
 }
@@ -77,11 +72,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     let scale = transfer_scale(max_bits[0]);
     for (var k = begin; k < end; k++) {
-        let j = fragments[k].y;
-        let side = outgoing[j].w;
+        let j = fragments[k].y & ~FRAGMENT_FRONT_BIT;
+        let front = (fragments[k].y & FRAGMENT_FRONT_BIT) != 0u;
         var received = bundle.environment.rgb;
         var neighbour = -1;
-        if (side > 0.0) {
+        if (front) {
             if (k + 1u < end) {
                 neighbour = i32(k + 1u);
             }
@@ -89,9 +84,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             neighbour = i32(k - 1u);
         }
         if (neighbour >= 0) {
-            let m = fragments[u32(neighbour)].y;
-            let o = outgoing[m];
-            received = select(vec3<f32>(0.0), o.rgb, o.w == -side);
+            let other = fragments[u32(neighbour)].y;
+            let other_front = (other & FRAGMENT_FRONT_BIT) != 0u;
+            // Its front must face back toward this patch: the opposite facing.
+            received = select(vec3<f32>(0.0), outgoing[other & ~FRAGMENT_FRONT_BIT].rgb, other_front != front);
         }
         for (var c = 0u; c < 3u; c++) {
             let value = u32(received[c] * scale + 0.5);

@@ -10,9 +10,11 @@
 //   1 counts     array<atomic<u32>>      read_write (resolution^2 + 1; fs_count)
 //   2 offsets    array<u32>              read (exclusive prefix sums of counts; fs_fill)
 //   3 cursor     array<atomic<u32>>      read_write (resolution^2; fs_fill)
-//   4 fragments  array<vec2<u32>>        read_write (bits of depth, patch; fs_fill)
+//   4 fragments  array<vec2<u32>>        read_write (bits of depth, patch | FRAGMENT_FRONT_BIT
+//                                        when the patch's front faces +d; fs_fill)
 //   5 overflow   atomic<u32>             read_write (set when a slot lies past capacity:
 //                                        the host grows the list and redoes the steps)
+//   6 outgoing   array<vec4<f32>>        read (w: s_j from bundle_reflect; fs_fill)
 // Host: src/stages/bundle_visibility.rs.
 
 @group(0) @binding(0) var<uniform> bundle: Bundle;
@@ -21,6 +23,7 @@
 @group(0) @binding(3) var<storage, read_write> cursor: array<atomic<u32>>;
 @group(0) @binding(4) var<storage, read_write> fragments: array<vec2<u32>>;
 @group(0) @binding(5) var<storage, read_write> overflow: atomic<u32>;
+@group(0) @binding(6) var<storage, read> outgoing: array<vec4<f32>>;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -58,7 +61,10 @@ fn fs_fill(in: VertexOut) {
     let line = line_index(in.clip);
     let slot = offsets[line] + atomicAdd(&cursor[line], 1u);
     if (slot < bundle.capacity) {
-        fragments[slot] = vec2<u32>(bitcast<u32>(in.depth), in.patch_id);
+        // The facing travels with the fragment, so sorting and transfer need not look up
+        // the patch.
+        let front = select(0u, FRAGMENT_FRONT_BIT, outgoing[in.patch_id].w > 0.0);
+        fragments[slot] = vec2<u32>(bitcast<u32>(in.depth), in.patch_id | front);
     } else {
         atomicMax(&overflow, 1u);
     }

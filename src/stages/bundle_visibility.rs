@@ -13,8 +13,8 @@ pub struct BundleVisibility {
 }
 
 impl BundleVisibility {
-    /// `buffers`: bundle, counts, offsets, cursor, fragments, overflow.
-    pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 6], resolution: u32) -> Self {
+    /// `buffers`: bundle, counts, offsets, cursor, fragments, overflow, outgoing.
+    pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 7], resolution: u32) -> Self {
         let stages = wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT;
         let layout = kernel::buffer_layout(
             device,
@@ -27,6 +27,7 @@ impl BundleVisibility {
                 (false, false, 4),
                 (false, false, 8),
                 (false, false, 4),
+                (false, true, 16),
             ],
         );
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
