@@ -136,11 +136,7 @@ impl Iteration {
                 resolution,
             ),
             scan: PrefixSum::new(device, lines + 1, &counts, &offsets),
-            transfer: BundleTransfer::new(
-                device,
-                [&bundle, &scene.patches, &offsets, &fragments, &outgoing, &sums, &max_bits],
-                lines,
-            ),
+            transfer: BundleTransfer::new(device, [&bundle, &offsets, &fragments, &outgoing, &sums, &max_bits], lines),
             finalize: BundleFinalize::new(
                 device,
                 [&bundle, &scene.patches, &sums, &max_bits, &outgoing, &scene.state],

@@ -8,22 +8,20 @@
 // Compute, workgroup 64, one invocation per line (2D dispatch past 65535 workgroups).
 // Bindings, group 0:
 //   0 bundle     uniform Bundle          read
-//   1 patches    array<Patch>            read
-//   2 offsets    array<u32>              read (line starts, resolution^2 + 1)
-//   3 fragments  array<vec2<u32>>        read_write (depth bits, patch | FRAGMENT_FRONT_BIT;
+//   1 offsets    array<u32>              read (line starts, resolution^2 + 1)
+//   2 fragments  array<vec2<u32>>        read_write (depth bits, patch | FRAGMENT_FRONT_BIT;
 //                                        each line's slice sorted in place by its invocation)
-//   4 outgoing   array<vec4<f32>>        read (O_j, s_j from bundle_reflect)
-//   5 sums       array<atomic<u32>>      read_write (6 per patch: lo, hi per channel)
-//   6 max_bits   array<u32>              read (largest radiance of the step)
+//   3 outgoing   array<vec4<f32>>        read (O_j from bundle_reflect)
+//   4 sums       array<atomic<u32>>      read_write (6 per patch: lo, hi per channel)
+//   5 max_bits   array<u32>              read (largest radiance of the step)
 // Host: src/stages/bundle_transfer.rs.
 
 @group(0) @binding(0) var<uniform> bundle: Bundle;
-@group(0) @binding(1) var<storage, read> patches: array<Patch>;
-@group(0) @binding(2) var<storage, read> offsets: array<u32>;
-@group(0) @binding(3) var<storage, read_write> fragments: array<vec2<u32>>;
-@group(0) @binding(4) var<storage, read> outgoing: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read_write> sums: array<atomic<u32>>;
-@group(0) @binding(6) var<storage, read> max_bits: array<u32>;
+@group(0) @binding(1) var<storage, read> offsets: array<u32>;
+@group(0) @binding(2) var<storage, read_write> fragments: array<vec2<u32>>;
+@group(0) @binding(3) var<storage, read> outgoing: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> sums: array<atomic<u32>>;
+@group(0) @binding(5) var<storage, read> max_bits: array<u32>;
 
 // Fixed-point scale 2^(31 - e) with largest radiance <= 2^e: shared with bundle_finalize.
 fn transfer_scale(bits: u32) -> f32 {

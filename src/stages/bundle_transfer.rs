@@ -2,7 +2,7 @@
 //! radiance each patch receives to its fixed-point sums.
 
 use crate::gpu::kernel;
-use crate::layout::{GpuBundle, GpuPatch};
+use crate::layout::GpuBundle;
 use crate::stages::prefix_sum::dispatch_size;
 
 pub struct BundleTransfer {
@@ -12,15 +12,14 @@ pub struct BundleTransfer {
 }
 
 impl BundleTransfer {
-    /// `buffers`: bundle, patches, offsets, fragments, outgoing, sums, max_bits.
-    pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 7], lines: u32) -> Self {
+    /// `buffers`: bundle, offsets, fragments, outgoing, sums, max_bits.
+    pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 6], lines: u32) -> Self {
         let layout = kernel::buffer_layout(
             device,
             "firstshot.bundle_transfer.layout",
             wgpu::ShaderStages::COMPUTE,
             &[
                 (true, true, std::mem::size_of::<GpuBundle>() as u64),
-                (false, true, std::mem::size_of::<GpuPatch>() as u64),
                 (false, true, 4),
                 (false, false, 8),
                 (false, true, 16),
