@@ -20,6 +20,10 @@ pub const VERTEX_TWIN_BIT: u32 = 1 << 31;
 pub const FIXED_POINT_SCALE: f32 = 2147483648.0;
 /// Bundle fragments carry their patch's facing (front toward +d) in the top bit of the id.
 pub const FRAGMENT_FRONT_BIT: u32 = 1 << 31;
+/// Prefix sums: invocations per workgroup, and values each scans in a run of its own (long
+/// runs keep the barrier-bound workgroup scan a small share of the work on CPU adapters).
+pub const PREFIX_SUM_WORKGROUP: u32 = 256;
+pub const PREFIX_SUM_PER_THREAD: u32 = 16;
 /// The most patches a scene may have (ids must leave the twin bit free).
 pub const MAX_PATCHES: u32 = 1 << 27;
 
@@ -221,6 +225,8 @@ pub fn wgsl_constants() -> String {
          const NO_PATCH: u32 = {NO_PATCH}u;\n\
          const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
+         const PREFIX_SUM_WORKGROUP: u32 = {PREFIX_SUM_WORKGROUP}u;\n\
+         const PREFIX_SUM_PER_THREAD: u32 = {PREFIX_SUM_PER_THREAD}u;\n\
          const PI: f32 = {pi:?};\n\
          const FIXED_POINT_SCALE: f32 = {scale:?};\n",
         pi = std::f32::consts::PI,

@@ -3,7 +3,9 @@
 // `add_block_offsets` adds each block's scanned total back. Integer sums: exact and
 // independent of thread order.
 //
-// Compute, workgroup 256, 4 values per invocation (BLOCK = 1024). Bindings (group 0):
+// Compute, workgroup PREFIX_SUM_WORKGROUP (256), PREFIX_SUM_PER_THREAD (16) values per
+// invocation (BLOCK = 4096): long runs per thread keep the barrier-bound workgroup scan a
+// small share of the work on CPU adapters. Bindings (group 0):
 //   0 params      uniform vec4<u32> (x: n)   read
 //   1 values      array<u32>                 read (n counts)
 //   2 scanned     array<u32>                 read_write (n exclusive prefix sums)
@@ -12,28 +14,29 @@
 // Invariant: dispatches cover ceil(n / BLOCK) workgroups (2D when above 65535).
 // Host: src/stages/prefix_sum.rs.
 
-const WORKGROUP: u32 = 256u;
-const PER_THREAD: u32 = 4u;
-const BLOCK: u32 = 1024u;
+// PREFIX_SUM_WORKGROUP and PREFIX_SUM_PER_THREAD come from the generated header.
+const WORKGROUP: u32 = PREFIX_SUM_WORKGROUP;
+const PER_THREAD: u32 = PREFIX_SUM_PER_THREAD;
+const BLOCK: u32 = WORKGROUP * PER_THREAD;
 
 @group(0) @binding(0) var<uniform> params: vec4<u32>;
 @group(0) @binding(1) var<storage, read> values: array<u32>;
 @group(0) @binding(2) var<storage, read_write> scanned: array<u32>;
 @group(0) @binding(3) var<storage, read_write> block_sums: array<u32>;
 
-var<workgroup> partial: array<u32, 256>;
+var<workgroup> partial: array<u32, PREFIX_SUM_WORKGROUP>;
 
 fn block_index(wg: vec3<u32>, groups: vec3<u32>) -> u32 {
     return wg.x + wg.y * groups.x;
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(PREFIX_SUM_WORKGROUP)
 fn scan_blocks(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
                @builtin(local_invocation_index) lid: u32) {
     let block = block_index(wg, groups);
     let n = params.x;
     let base = block * BLOCK + lid * PER_THREAD;
-    var local: array<u32, 4>;
+    var local: array<u32, PREFIX_SUM_PER_THREAD>;
     var total = 0u;
     for (var k = 0u; k < PER_THREAD; k++) {
         local[k] = total;
@@ -64,7 +67,7 @@ fn scan_blocks(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) gr
     }
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(PREFIX_SUM_WORKGROUP)
 fn add_block_offsets(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
                      @builtin(local_invocation_index) lid: u32) {
     let block = block_index(wg, groups);

@@ -1,9 +1,10 @@
 //! Exclusive prefix sum of u32 counts (`wgsl/prefix_sum.wgsl`), in as many levels as the
-//! length needs (1024 values per block and level).
+//! length needs (`BLOCK` values per block and level).
 
 use crate::gpu::{buffers, kernel};
 
-pub const BLOCK: u32 = 1024;
+/// Values per workgroup and level (reaches WGSL through the generated header).
+pub const BLOCK: u32 = crate::layout::PREFIX_SUM_WORKGROUP * crate::layout::PREFIX_SUM_PER_THREAD;
 
 /// Workgroup counts for `blocks` workgroups, folded into 2D past the 65535 limit.
 pub fn dispatch_size(blocks: u32) -> (u32, u32) {
