@@ -205,6 +205,7 @@ pub fn run(
             &reduce.pairs,
             total,
             &reduce.row_counts,
+            &buffers.samples,
         );
         ctx.queue.submit([encoder.finish()]);
         ctx.wait()?;

@@ -1,15 +1,18 @@
 // First-shot table: the appended (patch, sample, r_ij) pairs into compressed rows by patch.
 // `fill_rows` places each pair in its patch's row (row starts from the prefix sum of the
 // row counts); `sort_rows` orders each row by sample index, so the table does not depend
-// on the order in which the pairs were appended.
+// on the order in which the pairs were appended; `row_irradiance` sums S_i r_ij over each
+// row, which is all a diffuse patch needs (its BRDF does not depend on the directions).
 //
-// Compute, workgroup 64. fill_rows: one invocation per pair; sort_rows: one per patch
-// (2D dispatch past 65535 workgroups). Bindings (group 0):
+// Compute, workgroup 64. fill_rows: one invocation per pair; sort_rows, row_irradiance:
+// one per patch (2D dispatch past 65535 workgroups). Bindings (group 0):
 //   0 params   uniform vec4<u32> (x: pairs, y: patches)  read
 //   1 pairs    array<vec4<u32>>     read
 //   2 offsets  array<u32>           read (patches + 1 row starts)
 //   3 cursor   array<atomic<u32>>   read_write (zeroed before fill_rows)
 //   4 entries  array<vec2<u32>>     read_write (sample, bits of r_ij)
+//   5 samples  array<LightSample>   read
+//   6 irradiance array<vec4<f32>>   read_write (rgb sum_i S_i r_ij per patch)
 // Host: src/stages/first_shot_table.rs.
 
 @group(0) @binding(0) var<uniform> params: vec4<u32>;
@@ -17,6 +20,8 @@
 @group(0) @binding(2) var<storage, read> offsets: array<u32>;
 @group(0) @binding(3) var<storage, read_write> cursor: array<atomic<u32>>;
 @group(0) @binding(4) var<storage, read_write> entries: array<vec2<u32>>;
+@group(0) @binding(5) var<storage, read> samples: array<LightSample>;
+@group(0) @binding(6) var<storage, read_write> irradiance: array<vec4<f32>>;
 
 @compute @workgroup_size(64)
 fn fill_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -47,4 +52,17 @@ fn sort_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
         }
         entries[b] = item;
     }
+}
+
+@compute @workgroup_size(64)
+fn row_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let j = gid.x + gid.y * groups.x * 64u;
+    if (j >= params.y) {
+        return;
+    }
+    var sum = vec3<f32>(0.0);
+    for (var e = offsets[j]; e < offsets[j + 1u]; e++) {
+        sum += samples[entries[e].x].strength.rgb * bitcast<f32>(entries[e].y);
+    }
+    irradiance[j] = vec4<f32>(sum, 0.0);
 }

@@ -148,6 +148,8 @@ pub struct FirstShotTable {
     pub offsets: wgpu::Buffer,
     /// vec2<u32> per stored pair.
     pub entries: wgpu::Buffer,
+    /// vec4<f32> per patch: rgb sum_i S_i r_ij (all a diffuse patch needs).
+    pub irradiance: wgpu::Buffer,
     pub entry_count: u32,
 }
 
@@ -161,6 +163,7 @@ impl FirstShotTable {
                 buffers::storage_entry(0, true, 4),
                 buffers::storage_entry(1, true, 8),
                 buffers::storage_entry(2, true, std::mem::size_of::<GpuLightSample>() as u64),
+                buffers::storage_entry(3, true, 16),
             ],
         })
     }
@@ -178,6 +181,7 @@ impl FirstShotTable {
                 wgpu::BindGroupEntry { binding: 0, resource: self.offsets.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: self.entries.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 2, resource: samples.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: self.irradiance.as_entire_binding() },
             ],
         })
     }
@@ -192,6 +196,12 @@ impl FirstShotTable {
                 wgpu::BufferUsages::COPY_SRC,
             ),
             entries: buffers::storage_zeroed(device, "firstshot.first_shot.entries", 16, wgpu::BufferUsages::COPY_SRC),
+            irradiance: buffers::storage_zeroed(
+                device,
+                "firstshot.first_shot.irradiance",
+                16 * patch_count as u64,
+                wgpu::BufferUsages::COPY_SRC,
+            ),
             entry_count: 0,
         }
     }

@@ -4,9 +4,18 @@
 @group(1) @binding(0) var<storage, read> fs_offsets: array<u32>;       // row starts, patches + 1
 @group(1) @binding(1) var<storage, read> fs_entries: array<vec2<u32>>; // (sample, bits of r_ij)
 @group(1) @binding(2) var<storage, read> samples: array<LightSample>;
+@group(1) @binding(3) var<storage, read> fs_irradiance: array<vec4<f32>>; // sum_i S_i r_ij
 
 // Lfs_j(x, w_out) = sum_i S_i r_ij f_j(w'_i(x), x, w_out), w'_i(x) from y_i to x.
 fn first_shot_radiance(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
+    if (dot(n, w_out) <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    // A diffuse BRDF is kd / pi for every pair of directions above the surface, and every
+    // stored sample lies above it (only front faces received), so the row's sum suffices.
+    if (all(m.specular.rgb == vec3<f32>(0.0))) {
+        return fs_irradiance[j].rgb * m.diffuse.rgb / PI;
+    }
     var sum = vec3<f32>(0.0);
     for (var e = fs_offsets[j]; e < fs_offsets[j + 1u]; e++) {
         let entry = fs_entries[e];
