@@ -168,8 +168,10 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<SceneResult,
     };
 
     let mut points = Vec::new();
-    for first_shot in [true, false] {
-        for &n in &config.series {
+    // The two methods alternate, so that a change in the machine's load (it is shared)
+    // falls on both curves alike rather than on one of them.
+    for &n in &config.series {
+        for first_shot in [true, false] {
             let mut o = base.clone();
             (o.first_shot, o.iterations) = (first_shot, n);
             let out = render(&ctx, &s.scene, &s.patches, &o).map_err(|e| e.to_string())?;
@@ -198,6 +200,7 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<SceneResult,
         }
     }
 
+    points.sort_by_key(|p| (!p.first_shot, p.steps));
     // The long no-first-shot run has its own seed, so against the long first-shot run it
     // is one more (independent) point of the no-first-shot curve, far beyond the series.
     let long_vs_ref = reference.as_ref().map(|r| image_error(&long_nofs, r)).transpose().map_err(|e| e.to_string())?;

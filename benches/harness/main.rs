@@ -64,6 +64,10 @@ struct Args {
     /// Steps per timed render in throughput (default 40; --quick 8).
     #[arg(long, value_name = "N")]
     steps: Option<u32>,
+    /// Area lights as emitters in the iteration instead of first shot (throughput and
+    /// scaling; convergence always measures both).
+    #[arg(long)]
+    no_first_shot: bool,
     /// Override the scenes' bundle resolution (throughput and convergence).
     #[arg(long, value_name = "R")]
     bundle_resolution: Option<u32>,
@@ -109,6 +113,7 @@ pub struct Config {
     pub repeats: usize,
     pub steps: u32,
     pub bundle_resolution: Option<u32>,
+    pub first_shot: bool,
     pub long_steps: u32,
     pub series: Vec<u32>,
     pub references: Vec<PathBuf>,
@@ -129,6 +134,7 @@ impl Config {
         if let Some(r) = self.bundle_resolution {
             o.bundle_resolution = r;
         }
+        o.first_shot = self.first_shot;
         o
     }
 }
@@ -363,6 +369,7 @@ fn main() -> ExitCode {
         repeats: args.repeats.unwrap_or(if quick { 1 } else { 5 }).max(1),
         steps: args.steps.unwrap_or(if quick { 8 } else { 40 }).max(1),
         bundle_resolution: args.bundle_resolution,
+        first_shot: !args.no_first_shot,
         long_steps: args.long_steps.unwrap_or(if quick { 64 } else { 2000 }).max(1),
         series: args.series.clone().unwrap_or(if quick {
             vec![2, 4, 8, 16]

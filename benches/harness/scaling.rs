@@ -71,7 +71,7 @@ fn measure(
     let mut per_repeat = Vec::new();
     let mut fragments = Vec::new();
     for _ in 0..config.repeats {
-        per_repeat.push(median(&session.time_batches(batches, BATCH).map_err(|e| e.to_string())?));
+        per_repeat.push(median(&session.time_batches(batches, BATCH).map_err(|e| e.to_string())?.step_ms));
         fragments.push(session.fragments().map_err(|e| e.to_string())? as f64);
     }
     let timer = StageTimer::new(ctx, 16);
@@ -197,7 +197,7 @@ fn write_plots(config: &Config, slot: &Slot, rows: &[Row]) -> Result<(), String>
             points: ok(study).map(|r| (x(r), r.step_ms.median)).collect(),
             dashed: false,
         }];
-        for stage in ["transfer", "fill", "count", "estimate", "reflect"] {
+        for stage in ["transfer", "fill", "count", "prefix_sum", "estimate", "reflect"] {
             out.push(Series {
                 label: format!("{stage} (alone)"),
                 points: ok(study).filter_map(|r| Some((x(r), *r.stage_ms.get(stage)?))).collect(),

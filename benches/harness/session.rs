@@ -18,6 +18,17 @@ use firstshot::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
 use firstshot::stages::image_estimate::ImageEstimate;
 use std::time::Instant;
 
+/// Times of batches of steps, per step, in ms.
+#[derive(Debug, Default)]
+pub struct Batches {
+    /// Wall time of each batch.
+    pub step_ms: Vec<f64>,
+    /// Of that, the host's time to write the step's uniforms and record its commands (not
+    /// the submit: lavapipe runs the commands inside it): a floor under the step time that
+    /// no adapter can lower.
+    pub host_ms: Vec<f64>,
+}
+
 /// The name of the empty stage `profile_step` times first.
 pub const IDLE: &str = "idle";
 
@@ -113,15 +124,17 @@ impl<'a> Session<'a> {
     }
 
     /// Times `batches` batches of `size` steps, each batch submitted step by step and waited
-    /// for once at its end (as `render` does); returns the time per step of each batch in ms.
-    pub fn time_batches(&mut self, batches: usize, size: u32) -> Result<Vec<f64>> {
-        let mut out = Vec::with_capacity(batches);
+    /// for once at its end (as `render` does).
+    pub fn time_batches(&mut self, batches: usize, size: u32) -> Result<Batches> {
+        let mut out = Batches::default();
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         self.iteration.clear_overflow(&mut encoder);
         self.ctx.queue.submit([encoder.finish()]);
         for _ in 0..batches {
             let start = Instant::now();
+            let mut host = 0.0;
             for _ in 0..size {
+                let recording = Instant::now();
                 self.write_next();
                 let mut encoder = self
                     .ctx
@@ -130,10 +143,13 @@ impl<'a> Session<'a> {
                 for (_, record) in self.stages() {
                     record(&mut encoder);
                 }
-                self.ctx.queue.submit([encoder.finish()]);
+                let command = encoder.finish();
+                host += recording.elapsed().as_secs_f64();
+                self.ctx.queue.submit([command]);
             }
             self.ctx.wait()?;
-            out.push(start.elapsed().as_secs_f64() * 1e3 / size as f64);
+            out.step_ms.push(start.elapsed().as_secs_f64() * 1e3 / size as f64);
+            out.host_ms.push(host * 1e3 / size as f64);
         }
         if self.iteration.overflowed(self.ctx)? {
             // Cannot happen with the geometric bound as capacity; say so if it ever does.

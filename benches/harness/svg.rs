@@ -56,10 +56,18 @@ impl Axis {
             (lo, hi) = (0.0, 1.0);
         }
         if log {
-            // Whole decades, so that every decade has a labelled tick.
-            (lo, hi) = (lo.floor(), hi.ceil());
+            // Out to the nearest 1, 2 or 5 times a power of ten, so that both ends have a tick.
+            let down = |v: f64| {
+                let d = v.floor();
+                [5.0f64, 2.0, 1.0].iter().map(|m| d + m.log10()).find(|t| *t <= v + 1e-12).unwrap_or(d)
+            };
+            let up = |v: f64| {
+                let d = v.floor();
+                [1.0f64, 2.0, 5.0, 10.0].iter().map(|m| d + m.log10()).find(|t| *t >= v - 1e-12).unwrap_or(d + 1.0)
+            };
+            (lo, hi) = (down(lo), up(hi));
             if hi <= lo {
-                hi = lo + 1.0;
+                (lo, hi) = (down(lo - 0.1), up(hi + 0.1));
             }
         } else {
             if hi <= lo {
@@ -85,15 +93,17 @@ impl Axis {
     fn ticks(&self) -> Vec<(f64, String, bool)> {
         let mut out = Vec::new();
         if self.log {
-            let decades = (self.hi - self.lo).round() as i32;
-            for d in self.lo as i32..=self.hi as i32 {
-                let base = 10f64.powi(d);
-                out.push((base, format_number(base), true));
-                if d < self.hi as i32 {
-                    // Minor ticks at 2 and 5; labelled when there are few decades.
-                    for m in [2.0, 5.0] {
-                        out.push((m * base, if decades <= 2 { format_number(m * base) } else { String::new() }, false));
+            // Decades are major ticks; 2 and 5 minor ones, labelled when there are few decades.
+            let few = self.hi - self.lo <= 2.5;
+            for d in self.lo.floor() as i32..=self.hi.ceil() as i32 {
+                for m in [1.0, 2.0, 5.0] {
+                    let v = m * 10f64.powi(d);
+                    let l = v.log10();
+                    if l < self.lo - 1e-9 || l > self.hi + 1e-9 {
+                        continue;
                     }
+                    let major = m == 1.0;
+                    out.push((v, if major || few { format_number(v) } else { String::new() }, major));
                 }
             }
         } else {

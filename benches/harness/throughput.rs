@@ -50,6 +50,11 @@ pub struct Measured {
     pub render_total_ms: Summary,
     /// The same steps timed in the session, per batch of 8 (cross-check, finer spread).
     pub batch_step_ms: Summary,
+    /// Of a step in those batches, the host's time to write its uniforms and record it
+    /// (submit excluded): a floor under the step time on any adapter.
+    pub host_step_ms: Summary,
+    /// Whether the area lights were first shot (`--no-first-shot` turns it off).
+    pub first_shot: bool,
     pub fragments_per_step: Summary,
     /// Fragments per second at the median step time.
     pub fragments_per_second: f64,
@@ -121,7 +126,8 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<Measured, St
     let mut session = Session::new(&ctx, &s.scene, &s.patches, &options).map_err(|e| e.to_string())?;
     session.time_batches(1, 2).map_err(|e| e.to_string())?;
     let batches = if config.quick { 2 } else { 2 * config.repeats.max(3) };
-    let batch_step_ms = summary(&session.time_batches(batches, BATCH).map_err(|e| e.to_string())?);
+    let timed = session.time_batches(batches, BATCH).map_err(|e| e.to_string())?;
+    let (batch_step_ms, host_step_ms) = (summary(&timed.step_ms), summary(&timed.host_ms));
     let timer = StageTimer::new(&ctx, 16);
     let mut profiles = Vec::new();
     let mut fragments = Vec::new();
@@ -179,6 +185,8 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<Measured, St
         step_ms,
         render_total_ms,
         batch_step_ms,
+        host_step_ms,
+        first_shot: options.first_shot,
         fragments_per_second: fragments_per_step.median / (step_ms.median * 1e-3),
         fragments_per_step,
         fragment_capacity: session.capacity(),
@@ -253,7 +261,8 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
 fn print_summary(cases: &[Case]) {
     let mut rows = Vec::new();
     for c in cases {
-        let mut row = vec![c.scene.clone(), c.adapter.label()];
+        let fs = c.measured.as_ref().is_none_or(|m| m.first_shot);
+        let mut row = vec![format!("{}{}", c.scene, if fs { "" } else { " (no first shot)" }), c.adapter.label()];
         match &c.measured {
             Some(m) => row.extend([
                 m.patches.to_string(),
@@ -295,9 +304,10 @@ fn print_summary(cases: &[Case]) {
             if m.timestamps { "yes" } else { "no" },
         );
         println!(
-            "step {} ms in render, {} ms in batches of 8; cores busy {}; load average {}",
+            "step {} ms in render, {} ms in batches of 8 (host: {} ms to record); cores busy {}; load average {}",
             spread(&m.step_ms, 1),
             spread(&m.batch_step_ms, 1),
+            spread(&m.host_step_ms, 2),
             m.cores_busy.map_or("?".into(), |c| format!("{c:.2}")),
             m.load_average.map_or("?".into(), |l| format!("{:.2}", l[0]))
         );
@@ -314,8 +324,9 @@ fn print_summary(cases: &[Case]) {
                     format!("{:.2}", s.ms),
                     format!("{:.0}%", 100.0 * s.share),
                     format!("{:.1}", s.bytes / 1e6),
-                    format!("{:.2}", s.gb_per_s),
-                    format!("{:.0}%", 100.0 * s.of_copy_rate),
+                    // Under 0.1 ms a stage's time is mostly noise: no rate from it.
+                    if s.ms < 0.1 { "-".into() } else { format!("{:.2}", s.gb_per_s) },
+                    if s.ms < 0.1 { "-".into() } else { format!("{:.0}%", 100.0 * s.of_copy_rate) },
                 ]
             })
             .collect();
