@@ -45,7 +45,8 @@ struct Axis {
 }
 
 impl Axis {
-    fn new(values: impl Iterator<Item = f64>, log: bool) -> Axis {
+    /// `headroom`: a fraction of the data's range added above it (room for the legend).
+    fn new(values: impl Iterator<Item = f64>, log: bool, headroom: f64) -> Axis {
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for v in values {
             let v = if log { v.log10() } else { v };
@@ -55,6 +56,8 @@ impl Axis {
         if !lo.is_finite() {
             (lo, hi) = (0.0, 1.0);
         }
+        let base = if log { lo } else { lo.min(0.0) };
+        hi += headroom * (hi - base);
         if log {
             // Out to the nearest 1, 2 or 5 times a power of ten, so that both ends have a tick.
             let down = |v: f64| {
@@ -149,8 +152,8 @@ fn visible(series: &Series, log_x: bool, log_y: bool) -> Vec<(f64, f64)> {
 /// The plot as an SVG document.
 pub fn render(plot: &Plot) -> String {
     let shown: Vec<Vec<(f64, f64)>> = plot.series.iter().map(|s| visible(s, plot.log_x, plot.log_y)).collect();
-    let xa = Axis::new(shown.iter().flatten().map(|p| p.0), plot.log_x);
-    let ya = Axis::new(shown.iter().flatten().map(|p| p.1), plot.log_y);
+    let xa = Axis::new(shown.iter().flatten().map(|p| p.0), plot.log_x, 0.0);
+    let ya = Axis::new(shown.iter().flatten().map(|p| p.1), plot.log_y, 0.3);
     let (pw, ph) = (WIDTH - LEFT - RIGHT, HEIGHT - TOP - BOTTOM);
     let px = |x: f64| LEFT + xa.unit(x) * pw;
     let py = |y: f64| TOP + (1.0 - ya.unit(y)) * ph;

@@ -216,7 +216,8 @@ fn add_ratios(cases: &mut [Case]) {
             if let Some(m) = &c.measured {
                 c.ratio_to = Some(label.clone());
                 c.steps_per_second_ratio = Some(m.steps_per_second / b.steps_per_second);
-                c.first_shot_speed_ratio = Some(b.first_shot_ms.median / m.first_shot_ms.median);
+                c.first_shot_speed_ratio =
+                    (m.first_shot && b.first_shot).then(|| b.first_shot_ms.median / m.first_shot_ms.median);
             }
         }
     }
@@ -267,7 +268,7 @@ fn print_summary(cases: &[Case]) {
             Some(m) => row.extend([
                 m.patches.to_string(),
                 format!("{}/{}", m.bundle_resolution, m.hemicube_resolution),
-                spread(&m.first_shot_ms, 0),
+                if m.first_shot { spread(&m.first_shot_ms, 0) } else { "-".into() },
                 spread(&m.step_ms, 1),
                 format!("{:.1}", m.steps_per_second),
                 format!("{:.2}M", m.fragments_per_step.median / 1e6),
