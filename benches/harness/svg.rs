@@ -227,11 +227,35 @@ pub fn render(plot: &Plot) -> String {
             let _ = writeln!(s, r#"<circle cx="{:.1}" cy="{:.1}" r="3" fill="{colour}"/>"#, px(x), py(y));
         }
     }
-    // Legend in the top-right corner of the plot area.
+    // The legend goes in the corner of the plot area that hides the least of the lines
+    // (counted at points spaced along them), the top right on a tie.
     let rows = plot.series.len() as f64;
     let longest = plot.series.iter().map(|s| s.label.chars().count()).max().unwrap_or(0) as f64;
     let (lw, lh) = (longest * 6.8 + 44.0, rows * 18.0 + 8.0);
-    let (lx, ly) = (LEFT + pw - lw - 8.0, TOP + 8.0);
+    let samples: Vec<(f64, f64)> = shown
+        .iter()
+        .flat_map(|points| {
+            let pixels: Vec<(f64, f64)> = points.iter().map(|&(x, y)| (px(x), py(y))).collect();
+            let mut out = pixels.clone();
+            for w in pixels.windows(2) {
+                out.extend((1..16).map(|k| {
+                    let f = k as f64 / 16.0;
+                    (w[0].0 + f * (w[1].0 - w[0].0), w[0].1 + f * (w[1].1 - w[0].1))
+                }));
+            }
+            out
+        })
+        .collect();
+    let corners = [
+        (LEFT + pw - lw - 8.0, TOP + 8.0),
+        (LEFT + 8.0, TOP + 8.0),
+        (LEFT + pw - lw - 8.0, TOP + ph - lh - 8.0),
+        (LEFT + 8.0, TOP + ph - lh - 8.0),
+    ];
+    let hidden = |&(x, y): &(f64, f64)| {
+        samples.iter().filter(|(sx, sy)| (x..=x + lw).contains(sx) && (y..=y + lh).contains(sy)).count()
+    };
+    let (lx, ly) = corners.iter().copied().min_by_key(hidden).unwrap_or(corners[0]);
     if rows > 0.0 {
         let _ = writeln!(
             s,
