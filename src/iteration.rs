@@ -2,6 +2,7 @@
 //! its stages. Each step k draws its direction, grid rotation and sub-pixel offset from
 //! `StepRng(seed, k)`, so the state between steps is only J_j, win_j and the image sum.
 
+use crate::gpu::profile::{Stage, StageTime, StageTimer};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{Context, buffers};
 use crate::layout::GpuBundle;
@@ -78,6 +79,7 @@ pub struct Iteration {
     cursor: wgpu::Buffer,
     max_bits: wgpu::Buffer,
     overflow: wgpu::Buffer,
+    offsets: wgpu::Buffer,
     reflect: BundleReflect,
     visibility: BundleVisibility,
     scan: PrefixSum,
@@ -123,7 +125,13 @@ impl Iteration {
         let outgoing = buffers::storage_zeroed(device, "firstshot.iteration.outgoing", 16 * n, none);
         let max_bits = buffers::storage_zeroed(device, "firstshot.iteration.max_bits", 16, none);
         let counts = buffers::storage_zeroed(device, "firstshot.iteration.counts", 4 * (lines as u64 + 1), none);
-        let offsets = buffers::storage_zeroed(device, "firstshot.iteration.offsets", 4 * (lines as u64 + 1), none);
+        // COPY_SRC: `fragments` reads its last entry back.
+        let offsets = buffers::storage_zeroed(
+            device,
+            "firstshot.iteration.offsets",
+            4 * (lines as u64 + 1),
+            wgpu::BufferUsages::COPY_SRC,
+        );
         let cursor = buffers::storage_zeroed(device, "firstshot.iteration.cursor", 4 * lines as u64, none);
         let fragments = buffers::storage_zeroed(device, "firstshot.iteration.fragments", 8 * capacity.max(1), none);
         let overflow = buffers::storage_zeroed(device, "firstshot.iteration.overflow", 4, wgpu::BufferUsages::COPY_SRC);
@@ -147,6 +155,7 @@ impl Iteration {
             cursor,
             max_bits,
             overflow,
+            offsets: offsets.clone(),
             capacity: capacity as u32,
             resolution,
             _owned: vec![outgoing, offsets, fragments, sums],
@@ -165,6 +174,50 @@ impl Iteration {
         self.visibility.record_fill(encoder, &scene.vertices, scene.patch_count);
         self.transfer.record(encoder);
         self.finalize.record(encoder);
+    }
+
+    /// The stages of a step in the order `record_step` records them, each on its own, so
+    /// that a profiler can submit and time them one by one (`gpu::profile`).
+    pub fn stages<'a>(&'a self, scene: &'a SceneBuffers) -> Vec<Stage<'a>> {
+        vec![
+            (
+                "clear",
+                Box::new(move |e: &mut wgpu::CommandEncoder| {
+                    e.clear_buffer(&self.max_bits, 0, None);
+                    e.clear_buffer(&self.counts, 0, None);
+                    e.clear_buffer(&self.cursor, 0, None);
+                }),
+            ),
+            ("reflect", Box::new(move |e: &mut wgpu::CommandEncoder| self.reflect.record(e))),
+            (
+                "count",
+                Box::new(move |e: &mut wgpu::CommandEncoder| {
+                    self.visibility.record_count(e, &scene.vertices, scene.patch_count)
+                }),
+            ),
+            ("prefix_sum", Box::new(move |e: &mut wgpu::CommandEncoder| self.scan.record(e))),
+            (
+                "fill",
+                Box::new(move |e: &mut wgpu::CommandEncoder| {
+                    self.visibility.record_fill(e, &scene.vertices, scene.patch_count)
+                }),
+            ),
+            ("transfer", Box::new(move |e: &mut wgpu::CommandEncoder| self.transfer.record(e))),
+            ("finalize", Box::new(move |e: &mut wgpu::CommandEncoder| self.finalize.record(e))),
+        ]
+    }
+
+    /// Runs one step (its bundle uniform must already be written) stage by stage, each
+    /// submitted and waited for, and returns each stage's time. The state it leaves is the
+    /// same as `record_step`'s.
+    pub fn profile_step(&self, ctx: &Context, scene: &SceneBuffers, timer: &StageTimer) -> Result<Vec<StageTime>> {
+        timer.run(ctx, &self.stages(scene))
+    }
+
+    /// Fragments (surfaces on lines) of the last step: the last prefix sum of the counts.
+    pub fn fragments(&self, ctx: &Context) -> Result<u64> {
+        let lines = self.resolution as u64 * self.resolution as u64;
+        Ok(buffers::read_back_at::<u32>(&ctx.device, &ctx.queue, &self.offsets, 4 * lines, 4)?[0] as u64)
     }
 
     /// Whether any step since the last `clear_overflow` ran out of fragment room.

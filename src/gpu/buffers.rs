@@ -50,6 +50,17 @@ pub fn read_back<T: bytemuck::Pod>(
     buffer: &wgpu::Buffer,
     size: u64,
 ) -> Result<Vec<T>> {
+    read_back_at(device, queue, buffer, 0, size)
+}
+
+/// As `read_back`, from byte `offset` (a multiple of 4) of `buffer`.
+pub fn read_back_at<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    size: u64,
+) -> Result<Vec<T>> {
     let size = size.next_multiple_of(4);
     let staging = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("firstshot.readback"),
@@ -59,7 +70,7 @@ pub fn read_back<T: bytemuck::Pod>(
     });
     let mut encoder =
         device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.readback") });
-    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    encoder.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
     queue.submit([encoder.finish()]);
     let slice = staging.slice(..size);
     let (tx, rx) = std::sync::mpsc::channel();

@@ -18,6 +18,9 @@ pub enum AdapterChoice {
     /// The first adapter (in `Auto` order) whose name contains this, case-insensitively, or
     /// whose backend it names.
     Name(String),
+    /// The adapter at this position of `list_adapters()`. Tools need it where two adapters
+    /// share a name (Mesa's llvmpipe is both the Vulkan and the GL adapter).
+    Index(usize),
 }
 
 impl std::str::FromStr for AdapterChoice {
@@ -115,7 +118,7 @@ fn sorted_adapters(instance: &wgpu::Instance) -> Vec<wgpu::Adapter> {
     adapters
 }
 
-fn matches(choice: &AdapterChoice, info: &wgpu::AdapterInfo) -> bool {
+fn matches(choice: &AdapterChoice, index: usize, info: &wgpu::AdapterInfo) -> bool {
     match choice {
         AdapterChoice::Auto => true,
         AdapterChoice::Cpu => info.device_type == wgpu::DeviceType::Cpu,
@@ -129,6 +132,7 @@ fn matches(choice: &AdapterChoice, info: &wgpu::AdapterInfo) -> bool {
             let part = part.to_lowercase();
             info.name.to_lowercase().contains(&part) || format!("{:?}", info.backend).to_lowercase() == part
         }
+        AdapterChoice::Index(i) => index == *i,
     }
 }
 
@@ -136,15 +140,22 @@ impl Context {
     /// Opens a device on the first adapter that fits `choice`, with the adapter's own limits
     /// (large scenes need them) and no optional features: the portable path needs none.
     pub fn new(choice: &AdapterChoice) -> Result<Context> {
+        Self::new_with_features(choice, wgpu::Features::empty())
+    }
+
+    /// As `new`, with those of the `wanted` optional features that the adapter has (tools
+    /// such as the benchmark harness ask for timestamp queries); `features()` says which
+    /// were enabled. Nothing in the library depends on them.
+    pub fn new_with_features(choice: &AdapterChoice, wanted: wgpu::Features) -> Result<Context> {
         let instance = instance();
         let adapters = sorted_adapters(&instance);
         let found: Vec<String> = adapters.iter().map(|a| AdapterSummary::of(&a.get_info()).to_string()).collect();
         let mut failures = Vec::new();
-        for adapter in adapters.into_iter().filter(|a| matches(choice, &a.get_info())) {
+        for (_, adapter) in adapters.into_iter().enumerate().filter(|(i, a)| matches(choice, *i, &a.get_info())) {
             let summary = AdapterSummary::of(&adapter.get_info());
             let desc = wgpu::DeviceDescriptor {
                 label: Some("firstshot.device"),
-                required_features: wgpu::Features::empty(),
+                required_features: wanted & adapter.features(),
                 required_limits: adapter.limits(),
                 ..Default::default()
             };
@@ -184,6 +195,11 @@ impl Context {
 
     pub fn limits(&self) -> wgpu::Limits {
         self.device.limits()
+    }
+
+    /// The optional features the device was opened with.
+    pub fn features(&self) -> wgpu::Features {
+        self.device.features()
     }
 
     /// Waits for all submitted work; a lost device, a timeout or any GPU error reported

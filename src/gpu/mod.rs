@@ -4,6 +4,7 @@
 pub mod buffers;
 pub mod context;
 pub mod kernel;
+pub mod profile;
 pub mod scene_buffers;
 
 pub use context::{AdapterChoice, AdapterSummary, Context};

@@ -1,0 +1,230 @@
+//! Scaling: step time against patch count (the Sierpinski scene at levels 3 to 7, built in
+//! memory from scenes/sierpinski.toml) and against bundle resolution, with the fragments of
+//! a step and each stage's time, so the growth can be read per stage.
+
+use crate::session::{IDLE, Session, own_time};
+use crate::stats::{Summary, median, summary};
+use crate::svg::{Plot, Series};
+use crate::{Config, LoadedScene, Machine, Slot, guarded, print_table, scene_path, write_json, write_text};
+use firstshot::gpu::Context;
+use firstshot::gpu::profile::StageTimer;
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    pub study: &'static str,
+    pub level: u32,
+    pub bundle_resolution: u32,
+    pub patches: usize,
+    pub first_shot_ms: f64,
+    /// Per-repeat medians of the time per step (batches of `BATCH`).
+    pub step_ms: Summary,
+    pub fragments_per_step: f64,
+    /// Median time of each stage (timestamps where the device has them, else wall).
+    pub stage_ms: BTreeMap<String, f64>,
+    pub error: Option<String>,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    machine: &'a Machine,
+    quick: bool,
+    adapter: &'a Slot,
+    steps: u32,
+    repeats: usize,
+    rows: &'a [Row],
+}
+
+const BATCH: u32 = 4;
+
+/// The Sierpinski scene at `level`: its text with the fractal's level replaced.
+fn sierpinski(level: u32) -> Result<LoadedScene, String> {
+    let path = scene_path("sierpinski");
+    let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let marker = "level = 6";
+    if !text.contains(marker) {
+        return Err(format!("{}: no `{marker}` to change", path.display()));
+    }
+    let scene = firstshot::scene::load::load_str(&text.replacen(marker, &format!("level = {level}"), 1), &path)
+        .map_err(|e| e.to_string())?;
+    let patches = firstshot::scene::tessellate(&scene, scene.settings.patch_size).map_err(|e| e.to_string())?;
+    Ok(LoadedScene { name: format!("sierpinski level {level}"), scene, patches })
+}
+
+fn measure(
+    config: &Config,
+    ctx: &Context,
+    study: &'static str,
+    level: u32,
+    resolution: Option<u32>,
+) -> Result<Row, String> {
+    let s = sierpinski(level)?;
+    let mut options = config.options(&s.scene);
+    if let Some(r) = resolution {
+        options.bundle_resolution = r;
+    }
+    let mut session = Session::new(ctx, &s.scene, &s.patches, &options).map_err(|e| e.to_string())?;
+    let first_shot_ms = session.first_shot.as_ref().map_or(0.0, |f| f.ms);
+    session.time_batches(1, 2).map_err(|e| e.to_string())?;
+    let batches = config.scaling_steps.div_ceil(BATCH) as usize;
+    let mut per_repeat = Vec::new();
+    let mut fragments = Vec::new();
+    for _ in 0..config.repeats {
+        per_repeat.push(median(&session.time_batches(batches, BATCH).map_err(|e| e.to_string())?.step_ms));
+        fragments.push(session.fragments().map_err(|e| e.to_string())? as f64);
+    }
+    let timer = StageTimer::new(ctx, 16);
+    let mut stage_times: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    for _ in 0..2 {
+        let (times, f) = session.profile_step(&timer).map_err(|e| e.to_string())?;
+        fragments.push(f as f64);
+        let idle = times.iter().find(|t| t.name == IDLE).map_or(0.0, |t| t.wall_ms);
+        for t in times.iter().filter(|t| t.name != IDLE) {
+            stage_times.entry(t.name.to_string()).or_default().push(own_time(t.wall_ms, t.gpu_ms, idle).0);
+        }
+    }
+    Ok(Row {
+        study,
+        level,
+        bundle_resolution: options.bundle_resolution,
+        patches: s.patches.patches.len(),
+        first_shot_ms,
+        step_ms: summary(&per_repeat),
+        fragments_per_step: median(&fragments),
+        stage_ms: stage_times.into_iter().map(|(k, v)| (k, median(&v))).collect(),
+        error: None,
+    })
+}
+
+pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), String> {
+    println!("\n== scaling");
+    let slot = slots.first().ok_or("no adapter")?;
+    if slots.len() > 1 {
+        eprintln!("scaling runs on the first selected adapter only: {}", slot.label());
+    }
+    let ctx = slot.open(config.timestamps)?;
+    let default_resolution = config.options(&sierpinski(3)?.scene).bundle_resolution;
+    let mut plan: Vec<(&'static str, u32, Option<u32>)> = config.levels.iter().map(|&l| ("patches", l, None)).collect();
+    plan.extend(config.resolutions.iter().map(|&r| ("resolution", 6, Some(r))));
+    let mut rows = Vec::new();
+    for (study, level, resolution) in plan {
+        let r = resolution.unwrap_or(default_resolution);
+        eprintln!("{study}: level {level}, bundle resolution {r}");
+        let row = guarded(|| measure(config, &ctx, study, level, resolution)).unwrap_or_else(|e| {
+            eprintln!("  FAILED: {e}");
+            Row {
+                study,
+                level,
+                bundle_resolution: r,
+                patches: 0,
+                first_shot_ms: f64::NAN,
+                step_ms: summary(&[]),
+                fragments_per_step: f64::NAN,
+                stage_ms: BTreeMap::new(),
+                error: Some(e),
+            }
+        });
+        if row.error.is_none() {
+            eprintln!(
+                "  {} patches, {:.1} ms per step, {:.0} fragments",
+                row.patches, row.step_ms.median, row.fragments_per_step
+            );
+        }
+        rows.push(row);
+    }
+    print_rows(&rows);
+    let path = write_json(
+        &config.out,
+        "scaling.json",
+        &Report {
+            machine,
+            quick: config.quick,
+            adapter: slot,
+            steps: config.scaling_steps,
+            repeats: config.repeats,
+            rows: &rows,
+        },
+    )?;
+    write_plots(config, slot, &rows)?;
+    println!("wrote {} and scaling_patches.svg, scaling_resolution.svg", path.display());
+    if rows.iter().all(|r| r.error.is_some()) {
+        return Err("nothing measured".into());
+    }
+    Ok(())
+}
+
+fn print_rows(rows: &[Row]) {
+    let stages: Vec<String> = rows.iter().find(|r| r.error.is_none()).map_or(vec![], |r| {
+        // Product order, not alphabetical.
+        let order = ["clear", "reflect", "count", "prefix_sum", "fill", "transfer", "finalize", "camera", "estimate"];
+        order.iter().filter(|s| r.stage_ms.contains_key(**s)).map(|s| s.to_string()).collect()
+    });
+    let mut headers = vec!["study", "level", "bundle", "patches", "first shot ms", "step ms", "frags/step", "ns/frag"];
+    headers.extend(stages.iter().map(String::as_str));
+    let table: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            let mut row = vec![r.study.to_string(), r.level.to_string(), r.bundle_resolution.to_string()];
+            if let Some(e) = &r.error {
+                row.push(format!("FAILED: {e}"));
+                return row;
+            }
+            row.extend([
+                r.patches.to_string(),
+                format!("{:.0}", r.first_shot_ms),
+                crate::spread(&r.step_ms, 1),
+                format!("{:.2}M", r.fragments_per_step / 1e6),
+                format!("{:.0}", r.step_ms.median * 1e6 / r.fragments_per_step),
+            ]);
+            row.extend(stages.iter().map(|s| r.stage_ms.get(s).map_or("-".into(), |v| format!("{v:.1}"))));
+            row
+        })
+        .collect();
+    println!("(stage columns: ms per stage of one step, each submitted alone)");
+    print_table(&headers, &table);
+}
+
+fn write_plots(config: &Config, slot: &Slot, rows: &[Row]) -> Result<(), String> {
+    let subtitle = format!(
+        "{} ({}, {}); median of {} repeats of {} steps; stages timed alone",
+        slot.adapter.name, slot.adapter.backend, slot.adapter.device_type, config.repeats, config.scaling_steps
+    );
+    let ok = |study: &'static str| rows.iter().filter(move |r| r.study == study && r.error.is_none());
+    let stage_series = |study: &'static str, x: &dyn Fn(&Row) -> f64| -> Vec<Series> {
+        let mut out = vec![Series {
+            label: "whole step".into(),
+            points: ok(study).map(|r| (x(r), r.step_ms.median)).collect(),
+            dashed: false,
+        }];
+        for stage in ["transfer", "fill", "count", "prefix_sum", "estimate", "reflect"] {
+            out.push(Series {
+                label: format!("{stage} (alone)"),
+                points: ok(study).filter_map(|r| Some((x(r), *r.stage_ms.get(stage)?))).collect(),
+                dashed: true,
+            });
+        }
+        out
+    };
+    let patches = Plot {
+        title: "Step time against patch count (Sierpinski levels)".into(),
+        subtitle: subtitle.clone(),
+        x_label: "patches".into(),
+        y_label: "ms".into(),
+        log_x: false,
+        log_y: false,
+        series: stage_series("patches", &|r| r.patches as f64),
+    };
+    let resolution = Plot {
+        title: "Step time against bundle resolution (Sierpinski level 6)".into(),
+        subtitle,
+        x_label: "bundle resolution (pixels per edge)".into(),
+        y_label: "ms".into(),
+        log_x: true,
+        log_y: true,
+        series: stage_series("resolution", &|r| r.bundle_resolution as f64),
+    };
+    write_text(&config.out, "scaling_patches.svg", &crate::svg::render(&patches))?;
+    write_text(&config.out, "scaling_resolution.svg", &crate::svg::render(&resolution))?;
+    Ok(())
+}

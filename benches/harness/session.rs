@@ -1,0 +1,287 @@
+//! One scene set up on one adapter the way `render::render` sets it up (scene buffers, first
+//! shot, camera, image estimate, iteration), kept alive so that steps can be timed in
+//! batches, profiled stage by stage, and their fragments counted.
+//!
+//! The headline numbers come from `render` itself; this exists for what `render` does not
+//! expose: each stage's time, the fragments of a step, and many steps on one first shot.
+
+use firstshot::Result;
+use firstshot::first_shot::{self, FirstShotStats};
+use firstshot::gpu::Context;
+use firstshot::gpu::profile::{Stage, StageTime, StageTimer};
+use firstshot::gpu::scene_buffers::SceneBuffers;
+use firstshot::iteration::{Iteration, bundle_of_step, fragment_bound};
+use firstshot::layout::{GpuEstimateParams, GpuLightSample, GpuMaterial, GpuPatch, GpuPatchState, RasterVertex};
+use firstshot::render::{RenderOptions, check_limits};
+use firstshot::scene::{Patches, Scene};
+use firstshot::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
+use firstshot::stages::image_estimate::ImageEstimate;
+use std::time::Instant;
+
+/// Times of batches of steps, per step, in ms.
+#[derive(Debug, Default)]
+pub struct Batches {
+    /// Wall time of each batch.
+    pub step_ms: Vec<f64>,
+    /// Of that, the host's time to write the step's uniforms and record its commands (not
+    /// the submit: lavapipe runs the commands inside it): a floor under the step time that
+    /// no adapter can lower.
+    pub host_ms: Vec<f64>,
+}
+
+/// The name of the empty stage `profile_step` times first.
+pub const IDLE: &str = "idle";
+
+pub struct Session<'a> {
+    ctx: &'a Context,
+    scene: &'a Scene,
+    options: RenderOptions,
+    buffers: SceneBuffers,
+    camera: CameraItemBuffer,
+    estimate: ImageEstimate,
+    iteration: Iteration,
+    near: f64,
+    next_step: u64,
+    pub first_shot: Option<FirstShotStats>,
+    pub pairs: u32,
+}
+
+impl<'a> Session<'a> {
+    pub fn new(ctx: &'a Context, scene: &'a Scene, patches: &Patches, options: &RenderOptions) -> Result<Self> {
+        check_limits(&ctx.limits(), patches, options)?;
+        let device = &ctx.device;
+        let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
+        let camera = CameraItemBuffer::new(device, options.width, options.height);
+        let first_shot = if options.first_shot && !patches.samples.is_empty() {
+            Some(first_shot::run(ctx, &mut buffers, patches, options.hemicube_resolution, options.light_window)?)
+        } else {
+            None
+        };
+        let estimate = ImageEstimate::new(device, &buffers, &camera);
+        let e = scene.environment;
+        ctx.queue.write_buffer(
+            &estimate.params,
+            0,
+            bytemuck::bytes_of(&GpuEstimateParams {
+                environment: [e[0], e[1], e[2], 0.0],
+                patch_count: buffers.patch_count,
+                use_state: 1,
+                _pad: [0; 2],
+            }),
+        );
+        let resolution = options.bundle_resolution;
+        let capacity = fragment_bound(patches, buffers.radius, resolution.max(4));
+        let iteration = Iteration::new(ctx, &buffers, resolution, capacity)?;
+        let near = buffers.radius * 1e-5;
+        Ok(Session {
+            ctx,
+            scene,
+            options: options.clone(),
+            pairs: first_shot.as_ref().map_or(0, |f| f.pairs),
+            buffers,
+            camera,
+            estimate,
+            iteration,
+            near,
+            next_step: 0,
+            first_shot,
+        })
+    }
+
+    pub fn capacity(&self) -> u32 {
+        self.iteration.capacity
+    }
+
+    /// Writes the uniforms of the next step (as `render` does) and returns its index.
+    fn write_next(&mut self) -> u64 {
+        let k = self.next_step;
+        self.next_step += 1;
+        let b = &self.buffers;
+        let (mut bundle, mut rng) = bundle_of_step(self.options.seed, k, b.centre, b.radius, self.iteration.resolution);
+        let e = self.scene.environment;
+        bundle.environment = [e[0], e[1], e[2], 0.0];
+        bundle.patch_count = b.patch_count;
+        bundle.capacity = self.iteration.capacity;
+        bundle.use_state = (k > 0) as u32;
+        self.ctx.queue.write_buffer(&self.iteration.bundle, 0, bytemuck::bytes_of(&bundle));
+        let jitter = [rng.uniform() as f32, rng.uniform() as f32];
+        let cam = gpu_camera(&self.scene.camera, self.options.width, self.options.height, self.near, jitter);
+        self.ctx.queue.write_buffer(&self.camera.camera, 0, bytemuck::bytes_of(&cam));
+        k
+    }
+
+    /// The stages of a whole step as `render` records it: the iteration's, then the camera
+    /// item buffer and the image estimate.
+    fn stages(&self) -> Vec<Stage<'_>> {
+        let mut stages = self.iteration.stages(&self.buffers);
+        let (camera, estimate, buffers) = (&self.camera, &self.estimate, &self.buffers);
+        stages.push((
+            "camera",
+            Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
+        ));
+        stages.push(("estimate", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record(e))));
+        stages
+    }
+
+    /// Times `batches` batches of `size` steps, each batch submitted step by step and waited
+    /// for once at its end (as `render` does).
+    pub fn time_batches(&mut self, batches: usize, size: u32) -> Result<Batches> {
+        let mut out = Batches::default();
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        self.iteration.clear_overflow(&mut encoder);
+        self.ctx.queue.submit([encoder.finish()]);
+        for _ in 0..batches {
+            let start = Instant::now();
+            let mut host = 0.0;
+            for _ in 0..size {
+                let recording = Instant::now();
+                self.write_next();
+                let mut encoder = self
+                    .ctx
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.bench.step") });
+                for (_, record) in self.stages() {
+                    record(&mut encoder);
+                }
+                let command = encoder.finish();
+                host += recording.elapsed().as_secs_f64();
+                self.ctx.queue.submit([command]);
+            }
+            self.ctx.wait()?;
+            out.step_ms.push(start.elapsed().as_secs_f64() * 1e3 / size as f64);
+            out.host_ms.push(host * 1e3 / size as f64);
+        }
+        if self.iteration.overflowed(self.ctx)? {
+            // Cannot happen with the geometric bound as capacity; say so if it ever does.
+            return Err(firstshot::Error::Gpu("a bundle step overflowed its fragment list".into()));
+        }
+        Ok(out)
+    }
+
+    /// One step, stage by stage; then the fragments it produced. The first entry, `idle`,
+    /// is an empty submission: the round trip that every other entry's wall time includes.
+    pub fn profile_step(&mut self, timer: &StageTimer) -> Result<(Vec<StageTime>, u64)> {
+        self.write_next();
+        let mut stages: Vec<Stage> = vec![(IDLE, Box::new(|_: &mut wgpu::CommandEncoder| {}))];
+        stages.extend(self.stages());
+        let times = timer.run(self.ctx, &stages)?;
+        Ok((times, self.iteration.fragments(self.ctx)?))
+    }
+
+    /// Fragments of the last step.
+    pub fn fragments(&self) -> Result<u64> {
+        self.iteration.fragments(self.ctx)
+    }
+
+    /// The sizes the byte model needs.
+    pub fn sizes(&self, fragments: u64) -> Sizes {
+        let r = self.iteration.resolution as f64;
+        Sizes {
+            patches: self.buffers.patch_count as f64,
+            lines: r * r,
+            fragments: fragments as f64,
+            pixels: self.options.width as f64 * self.options.height as f64,
+            pairs: self.pairs as f64,
+        }
+    }
+}
+
+/// A stage's own time from its profiled wall time, its timestamps (if any) and the idle
+/// round trip, and whether the timestamps are plausible: within a factor 2 of the wall
+/// time less the round trip (lavapipe puts some compute dispatches outside their
+/// timestamps). Stages shorter than a round trip cannot be checked and are trusted.
+pub fn own_time(wall_ms: f64, gpu_ms: Option<f64>, idle_ms: f64) -> (f64, Option<bool>) {
+    let net = (wall_ms - idle_ms).max(0.0);
+    match gpu_ms {
+        Some(g) => {
+            let plausible = net < 0.05 + idle_ms || (g >= 0.5 * net && g <= 2.0 * net);
+            (if plausible { g } else { net }, Some(plausible))
+        }
+        None => (net, None),
+    }
+}
+
+/// What a step's memory traffic scales with.
+#[derive(Debug, Clone, Copy)]
+pub struct Sizes {
+    pub patches: f64,
+    pub lines: f64,
+    pub fragments: f64,
+    pub pixels: f64,
+    /// Stored first-shot (patch, sample) pairs.
+    pub pairs: f64,
+}
+
+/// Bytes a stage must at least read and write, from the sizes of what it touches (an
+/// atomic add counts as a read and a write; caches and overdraw are ignored, so this is a
+/// floor, good for orders of magnitude).
+pub fn stage_bytes(stage: &str, s: Sizes) -> f64 {
+    let sz = |n: usize| n as f64;
+    let patch = sz(std::mem::size_of::<GpuPatch>());
+    let state = sz(std::mem::size_of::<GpuPatchState>());
+    let material = sz(std::mem::size_of::<GpuMaterial>());
+    let vertex = 3.0 * sz(std::mem::size_of::<RasterVertex>());
+    let sample = sz(std::mem::size_of::<GpuLightSample>());
+    // First-shot entries per patch: each is 8 bytes plus its light sample.
+    let table = s.pairs * (8.0 + sample) + 4.0 * s.patches;
+    match stage {
+        // counts, cursor (u32 per line) and max_bits are zeroed.
+        "clear" => 8.0 * s.lines,
+        IDLE => 0.0,
+        // Patch, material, state and the first-shot entries in; O_j (vec4) and an atomic max out.
+        "reflect" => s.patches * (patch + material + state + 16.0 + 8.0) + table,
+        // Triangles in; one atomic add on a line count per fragment.
+        "count" => s.patches * vertex + 8.0 * s.fragments,
+        // Scan: counts in, offsets out; the block-offset pass reads and writes offsets again.
+        "prefix_sum" => 16.0 * s.lines,
+        // Triangles in; per fragment an offset, an atomic on the cursor, an 8-byte write.
+        "fill" => s.patches * vertex + 20.0 * s.fragments,
+        // Offsets in; per fragment: read and write it (sort), read its own and its
+        // neighbour's O (16 bytes each), three 64-bit fixed-point atomic adds.
+        "transfer" => 4.0 * s.lines + s.fragments * (16.0 + 32.0 + 24.0),
+        // Sums (6 u32), patch, O in; state out.
+        "finalize" => s.patches * (24.0 + patch + 16.0 + state),
+        // Triangles in; an id and a depth per pixel out.
+        "camera" => s.patches * vertex + 8.0 * s.pixels,
+        // Per pixel: id, patch, material, state, its patch's first-shot entries, the
+        // running sum read and written.
+        "estimate" => {
+            let per_patch = if s.patches > 0.0 { s.pairs / s.patches } else { 0.0 };
+            s.pixels * (4.0 + patch + material + state + per_patch * (8.0 + sample) + 32.0)
+        }
+        _ => f64::NAN,
+    }
+}
+
+/// The adapter's buffer-to-buffer copy rate in GB/s (bytes read plus bytes written), the
+/// yardstick for the stages' memory traffic: median of a few 64 MiB copies.
+pub fn copy_bandwidth(ctx: &Context) -> Result<f64> {
+    const BYTES: u64 = 64 << 20;
+    let buffer = |label| {
+        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: BYTES,
+            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    };
+    let (a, b) = (buffer("firstshot.bench.copy_a"), buffer("firstshot.bench.copy_b"));
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.clear_buffer(&a, 0, None);
+    ctx.queue.submit([encoder.finish()]);
+    ctx.wait()?;
+    let mut times = Vec::new();
+    for i in 0..6 {
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&a, 0, &b, 0, BYTES);
+        let command = encoder.finish();
+        let start = Instant::now();
+        ctx.queue.submit([command]);
+        ctx.wait()?;
+        // The first copy faults the pages of `b` in; it is the warm-up.
+        if i > 0 {
+            times.push(start.elapsed().as_secs_f64());
+        }
+    }
+    Ok(2.0 * BYTES as f64 / crate::stats::median(&times) / 1e9)
+}

@@ -1,0 +1,90 @@
+//! Stage-by-stage profiling of a bundle step (`gpu::profile`, `Iteration::profile_step`),
+//! which the benchmark harness relies on: it must compute exactly what `record_step` does,
+//! and opening a device with optional features must only ever enable what the adapter has.
+
+mod common;
+
+use common::*;
+use firstshot::gpu::buffers::read_back;
+use firstshot::gpu::context::list_adapters;
+use firstshot::gpu::profile::{StageTimer, TIMESTAMP_FEATURES};
+use firstshot::gpu::scene_buffers::SceneBuffers;
+use firstshot::gpu::{AdapterChoice, Context};
+use firstshot::iteration::{Iteration, bundle_of_step, fragment_bound};
+use firstshot::layout::GpuPatchState;
+use firstshot::scene::{Material, MaterialKind, Patches};
+use glam::DVec3;
+
+const RESOLUTION: u32 = 64;
+const STAGES: [&str; 7] = ["clear", "reflect", "count", "prefix_sum", "fill", "transfer", "finalize"];
+
+/// A closed diffuse room with glowing walls: every step has work in every stage.
+fn room_scene() -> (firstshot::scene::Scene, Patches) {
+    let mut scene = bare_scene();
+    scene.materials = vec![Material { name: "wall".into(), kind: MaterialKind::Diffuse { albedo: [0.5; 3] } }];
+    let tris: Vec<_> =
+        room(DVec3::new(-1.0, -0.8, -1.2), DVec3::new(1.3, 0.9, 1.1)).into_iter().flat_map(|t| split(t, 3)).collect();
+    let mut patches = patches_of(&tris, vec![]);
+    for p in &mut patches.patches {
+        p.material = Some(0);
+        p.emission = [1.0; 3];
+    }
+    (scene, patches)
+}
+
+/// Three steps, recorded whole or profiled stage by stage: the state's bits after them,
+/// the last step's fragments and the fragment bound.
+fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u32>, u64, u64) {
+    let (scene, patches) = room_scene();
+    let buffers = SceneBuffers::new(&ctx.device, &scene, &patches, false);
+    let bound = fragment_bound(&patches, buffers.radius, RESOLUTION);
+    let iteration = Iteration::new(ctx, &buffers, RESOLUTION, bound).unwrap();
+    let timer = StageTimer::new(ctx, 16);
+    for k in 0..3 {
+        let (mut bundle, _) = bundle_of_step(7, k, buffers.centre, buffers.radius, RESOLUTION);
+        bundle.patch_count = buffers.patch_count;
+        bundle.capacity = iteration.capacity;
+        bundle.use_state = (k > 0) as u32;
+        ctx.queue.write_buffer(&iteration.bundle, 0, bytemuck::bytes_of(&bundle));
+        if profiled {
+            let times = iteration.profile_step(ctx, &buffers, &timer).unwrap();
+            let names: Vec<&str> = times.iter().map(|t| t.name).collect();
+            assert_eq!(names, STAGES);
+            assert!(times.iter().all(|t| t.wall_ms >= 0.0));
+            assert_eq!(times.iter().all(|t| t.gpu_ms.is_some()), timer.has_timestamps());
+        } else {
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            iteration.record_step(&mut encoder, &buffers);
+            ctx.queue.submit([encoder.finish()]);
+        }
+    }
+    let size = (patches.patches.len() * std::mem::size_of::<GpuPatchState>()) as u64;
+    let state = read_back::<u32>(&ctx.device, &ctx.queue, &buffers.state, size).unwrap();
+    (state, iteration.fragments(ctx).unwrap(), bound)
+}
+
+#[test]
+fn test01_profiled_steps_compute_exactly_what_recorded_steps_do() {
+    let Some(ctx) = gpu() else { return };
+    let (whole, fragments_whole, bound) = three_steps(&ctx, false);
+    let (profiled, fragments_profiled, _) = three_steps(&ctx, true);
+    assert_eq!(whole, profiled, "stage by stage must leave the same state, bit for bit");
+    assert_eq!(fragments_whole, fragments_profiled);
+    // A closed room: every line through it crosses at least two walls, so a step has
+    // fragments, and never more than the geometric bound.
+    assert!(fragments_whole > 0 && fragments_whole <= bound, "{fragments_whole} fragments, bound {bound}");
+    assert!(whole.iter().any(|&b| b != 0), "the steps must have written the state");
+}
+
+#[test]
+fn test02_optional_features_are_enabled_only_where_the_adapter_has_them() {
+    let Some(plain) = gpu() else { return };
+    assert!(plain.features().is_empty(), "the product path opens no optional feature");
+    assert!(!StageTimer::new(&plain, 4).has_timestamps());
+    let index = list_adapters().iter().position(|a| *a == plain.summary).expect("the test adapter is listed");
+    let ctx = Context::new_with_features(&AdapterChoice::Index(index), TIMESTAMP_FEATURES).unwrap();
+    assert_eq!(ctx.summary, plain.summary, "AdapterChoice::Index opens the adapter list_adapters shows there");
+    assert_eq!(ctx.features(), TIMESTAMP_FEATURES & ctx.adapter.features());
+    assert_eq!(StageTimer::new(&ctx, 4).has_timestamps(), ctx.features().contains(TIMESTAMP_FEATURES));
+    eprintln!("{}: timestamps {}", ctx.summary, ctx.features().contains(TIMESTAMP_FEATURES));
+}
