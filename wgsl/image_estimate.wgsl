@@ -33,18 +33,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var radiance = params.environment.rgb;
     if (id != NO_PATCH && id <= params.patch_count) {
         let j = id - 1u;
-        let p = patches[j];
-        let n = p.normal.xyz;
+        // Field by field: a CPU adapter loads every field of a whole-struct read.
+        let plane = patches[j].normal;
+        let n = plane.xyz;
         // The ray through this pass's sample point of the pixel.
         let dir = normalize(pixel_direction(camera, gid.xy));
         let w_out = -dir;
         radiance = vec3<f32>(0.0);
         let facing = dot(n, w_out);
         if (facing > 0.0) {
-            let t = (p.normal.w - dot(n, camera.eye.xyz)) / dot(n, dir);
+            let t = (plane.w - dot(n, camera.eye.xyz)) / dot(n, dir);
             let x = camera.eye.xyz + t * dir;
-            let m = materials[p.material];
-            radiance = p.emission.rgb + first_shot_radiance(j, x, n, m, w_out);
+            let m = materials[patches[j].material];
+            radiance = patches[j].emission.rgb + first_shot_radiance(j, x, n, m, w_out);
             if (params.use_state != 0u) {
                 let s = state[j];
                 radiance += 2.0 * PI * s.incoming.rgb * brdf(m, n, -s.direction.xyz, w_out);
