@@ -46,21 +46,7 @@ impl FirstShotReduce {
                 storage(9, false, 4),
             ],
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("firstshot.first_shot_reduce.pipeline_layout"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |entry: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(&format!("firstshot.first_shot_reduce.{entry}")),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let pipeline = |entry: &str| kernel::compute_pipeline(device, &module, "first_shot_reduce", entry, &[&layout]);
         let n = scene.patch_count as u64;
         let none = wgpu::BufferUsages::empty();
         let face_params = buffers::uniform(

@@ -38,19 +38,7 @@ impl ImageEstimate {
             ],
         });
         let table_layout = FirstShotTable::layout(device);
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("firstshot.image_estimate.pipeline_layout"),
-            bind_group_layouts: &[Some(&layout), Some(&table_layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("firstshot.image_estimate.pipeline"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let pipeline = kernel::compute_pipeline(device, &module, "image_estimate", "main", &[&layout, &table_layout]);
         let params = buffers::uniform(
             device,
             "firstshot.image_estimate.params",

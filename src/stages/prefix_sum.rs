@@ -39,21 +39,7 @@ impl PrefixSum {
                 buffers::storage_entry(3, false, 4),
             ],
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("firstshot.prefix_sum.pipeline_layout"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |entry: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(&format!("firstshot.prefix_sum.{entry}")),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let pipeline = |entry: &str| kernel::compute_pipeline(device, &module, "prefix_sum", entry, &[&layout]);
         let (scan_pipeline, add_pipeline) = (pipeline("scan_blocks"), pipeline("add_block_offsets"));
         let mut owned = Vec::new();
         let mut levels = Vec::new();
