@@ -131,13 +131,8 @@ pub fn run(
 ) -> Result<FirstShotStats> {
     let start = Instant::now();
     let device = &ctx.device;
+    // The resolution was checked against the device by `render::check_limits`.
     let limits = ctx.limits();
-    if resolution > limits.max_texture_dimension_2d {
-        return Err(Error::Limits(format!(
-            "--hemicube-resolution {resolution} exceeds the device's largest texture side {}",
-            limits.max_texture_dimension_2d
-        )));
-    }
     let n = buffers.patch_count as u64;
     let samples = patches.samples.len() as u64;
     let max_pairs = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / 16;

@@ -2,7 +2,7 @@
 //! its stages. Each step k draws its direction, grid rotation and sub-pixel offset from
 //! `StepRng(seed, k)`, so the state between steps is only J_j, win_j and the image sum.
 
-use crate::gpu::profile::{Stage, StageTime, StageTimer};
+use crate::gpu::profile::Stage;
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{Context, buffers};
 use crate::layout::GpuBundle;
@@ -16,9 +16,27 @@ use crate::stages::prefix_sum::PrefixSum;
 use crate::{Error, Result};
 use glam::DVec3;
 
-/// The bundle of step `step`: direction uniform on the sphere, grid rotated uniformly about
-/// it and shifted by a uniform sub-pixel offset; the grid covers the bounding sphere.
-pub fn bundle_of_step(seed: u64, step: u64, centre: DVec3, radius: f64, resolution: u32) -> (GpuBundle, StepRng) {
+/// What every step's bundle uniform shares: the scene's bounding sphere, its size in
+/// patches and the environment radiance.
+#[derive(Debug, Clone, Copy)]
+pub struct BundleScene {
+    pub centre: DVec3,
+    pub radius: f64,
+    pub patch_count: u32,
+    pub environment: [f32; 3],
+}
+
+/// The bundle of step `step` (the one place a `GpuBundle` is made): direction uniform on
+/// the sphere, grid rotated uniformly about it and shifted by a uniform sub-pixel offset;
+/// the grid covers the bounding sphere. Returns the step's generator, advanced past the
+/// bundle's numbers, for the rest of the step's random choices.
+pub fn bundle_of_step(
+    seed: u64,
+    step: u64,
+    scene: &BundleScene,
+    resolution: u32,
+    capacity: u32,
+) -> (GpuBundle, StepRng) {
     let mut rng = StepRng::new(seed, step);
     let d = rng.direction();
     let angle = 2.0 * std::f64::consts::PI * rng.uniform();
@@ -28,20 +46,22 @@ pub fn bundle_of_step(seed: u64, step: u64, centre: DVec3, radius: f64, resoluti
     let v = d.cross(u);
     // One pixel of margin on each side, so the shifted grid still covers the sphere.
     let r = resolution as f64;
-    let half = radius * r / (r - 2.0);
+    let half = scene.radius * r / (r - 2.0);
     let pixel = 2.0 * half / r;
     let shift = [(rng.uniform() - 0.5) * 2.0 / r, (rng.uniform() - 0.5) * 2.0 / r];
     let f = |v: DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
+    let e = scene.environment;
     let bundle = GpuBundle {
         direction: f(d, pixel * pixel),
         axis_u: f(u / half, shift[0]),
         axis_v: f(v / half, shift[1]),
-        centre: f(centre, 1.0 / radius),
-        environment: [0.0; 4],
+        centre: f(scene.centre, 1.0 / scene.radius),
+        environment: [e[0], e[1], e[2], 0.0],
         resolution,
-        patch_count: 0,
-        capacity: 0,
-        use_state: 0,
+        patch_count: scene.patch_count,
+        capacity,
+        // J is zero before the first step has written it.
+        use_state: (step > 0) as u32,
     };
     (bundle, rng)
 }
@@ -74,7 +94,7 @@ pub fn fragment_bound(patches: &Patches, radius: f64, resolution: u32) -> u64 {
 
 /// The buffers and stages of a step.
 pub struct Iteration {
-    pub bundle: wgpu::Buffer,
+    bundle: wgpu::Buffer,
     counts: wgpu::Buffer,
     cursor: wgpu::Buffer,
     max_bits: wgpu::Buffer,
@@ -94,19 +114,9 @@ impl Iteration {
     pub fn new(ctx: &Context, scene: &SceneBuffers, resolution: u32, capacity: u64) -> Result<Self> {
         let device = &ctx.device;
         let limits = ctx.limits();
-        if resolution < MIN_BUNDLE_RESOLUTION || resolution > limits.max_texture_dimension_2d {
-            return Err(Error::Limits(format!(
-                "--bundle-resolution {resolution}: expected {MIN_BUNDLE_RESOLUTION} to {} (the device's largest texture side)",
-                limits.max_texture_dimension_2d
-            )));
-        }
+        // The resolution and the line table were checked by `render::check_limits`; the
+        // capacity grows at run time (overflow and redo), so it is checked here.
         let largest = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        if line_table_bytes(resolution) > largest {
-            return Err(Error::Limits(format!(
-                "--bundle-resolution {resolution}: the line table needs {} bytes in one buffer, the device allows {largest}; use a smaller --bundle-resolution",
-                line_table_bytes(resolution)
-            )));
-        }
         let max = largest / 8;
         if capacity > max {
             return Err(Error::Limits(format!(
@@ -162,22 +172,17 @@ impl Iteration {
         })
     }
 
-    /// Records one step (its bundle uniform must already be written): J_j and win_j of
-    /// every patch are replaced by this step's.
-    pub fn record_step(&self, encoder: &mut wgpu::CommandEncoder, scene: &SceneBuffers) {
-        encoder.clear_buffer(&self.max_bits, 0, None);
-        encoder.clear_buffer(&self.counts, 0, None);
-        encoder.clear_buffer(&self.cursor, 0, None);
-        self.reflect.record(encoder);
-        self.visibility.record_count(encoder, &scene.vertices, scene.patch_count);
-        self.scan.record(encoder);
-        self.visibility.record_fill(encoder, &scene.vertices, scene.patch_count);
-        self.transfer.record(encoder);
-        self.finalize.record(encoder);
+    /// Writes the bundle uniform of step `step` and returns the step's generator (see
+    /// `bundle_of_step`).
+    pub fn write_bundle(&self, queue: &wgpu::Queue, seed: u64, step: u64, scene: &BundleScene) -> StepRng {
+        let (bundle, rng) = bundle_of_step(seed, step, scene, self.resolution, self.capacity);
+        queue.write_buffer(&self.bundle, 0, bytemuck::bytes_of(&bundle));
+        rng
     }
 
-    /// The stages of a step in the order `record_step` records them, each on its own, so
-    /// that a profiler can submit and time them one by one (`gpu::profile`).
+    /// The bundle stages of a step, in order (its bundle uniform must already be written):
+    /// J_j and win_j of every patch are replaced by this step's. `render::Renderer` runs
+    /// them, recorded into one encoder or, for the profiler, one by one.
     pub fn stages<'a>(&'a self, scene: &'a SceneBuffers) -> Vec<Stage<'a>> {
         vec![
             (
@@ -205,13 +210,6 @@ impl Iteration {
             ("transfer", Box::new(move |e: &mut wgpu::CommandEncoder| self.transfer.record(e))),
             ("finalize", Box::new(move |e: &mut wgpu::CommandEncoder| self.finalize.record(e))),
         ]
-    }
-
-    /// Runs one step (its bundle uniform must already be written) stage by stage, each
-    /// submitted and waited for, and returns each stage's time. The state it leaves is the
-    /// same as `record_step`'s.
-    pub fn profile_step(&self, ctx: &Context, scene: &SceneBuffers, timer: &StageTimer) -> Result<Vec<StageTime>> {
-        timer.run(ctx, &self.stages(scene))
     }
 
     /// Fragments (surfaces on lines) of the last step: the last prefix sum of the counts.

@@ -2,10 +2,12 @@
 //! -> image. `main.rs` and the tests call `render`.
 
 use crate::checkpoint::Checkpoint;
-use crate::first_shot::{self, LightWindow};
+use crate::first_shot::{self, FirstShotStats, LightWindow};
+use crate::gpu::profile::{Stage, StageTime, StageTimer};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{AdapterSummary, Context};
 use crate::image::Image;
+use crate::iteration::{BundleScene, Iteration, fragment_bound};
 use crate::layout::*;
 use crate::rng::StepRng;
 use crate::scene::{Patches, Scene};
@@ -224,100 +226,373 @@ pub fn render_with(
     resume: Option<&Checkpoint>,
     hooks: &mut dyn Hooks,
 ) -> Result<Rendered> {
-    let start = Instant::now();
-    check_options(scene, options)?;
-    check_limits(&ctx.limits(), patches, options)?;
-    let device = &ctx.device;
-    let upload = Instant::now();
-    let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
-    let camera = CameraItemBuffer::new(device, options.width, options.height);
-    let upload_ms = milliseconds(upload);
-
-    let fs = if !options.first_shot || patches.samples.is_empty() {
-        None
-    } else {
-        Some(first_shot::run(ctx, &mut buffers, patches, options.hemicube_resolution, options.light_window)?)
-    };
-    if let Some(f) = &fs {
-        hooks.phase("first shot", f.ms);
-    }
-    // Built after the first shot: it binds the first-shot table.
-    let estimate = ImageEstimate::new(device, &buffers, &camera);
-    estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, false);
-
-    let image_start = Instant::now();
-    let near = buffers.radius * 1e-5;
-    let mut iteration_stats = IterationStats::default();
-    let camera_samples = if options.iterations == 0 {
-        direct_image(ctx, scene, options, &buffers, &camera, &estimate, near);
-        DIRECT_CAMERA_SAMPLES_PER_AXIS * DIRECT_CAMERA_SAMPLES_PER_AXIS
-    } else {
-        let run =
-            Run { ctx, scene, patches, options, buffers: &buffers, camera: &camera, estimate: &estimate, near, start };
-        iteration_stats = iterate(&run, resume, hooks)?;
-        hooks.phase("iteration", iteration_stats.ms);
-        iteration_stats.steps
-    };
-    let pixels = estimate.read_mean(device, &ctx.queue)?;
-    let image_ms = milliseconds(image_start);
-    ctx.check()?;
-    Ok(Rendered {
-        interrupted: iteration_stats.interrupted,
-        image: Image::new(options.width, options.height, pixels),
-        stats: RenderStats {
-            adapter: ctx.summary.clone(),
-            scene: scene.source.display().to_string(),
-            patches: patches.patches.len(),
-            light_samples: patches.samples.len(),
-            image: [options.width, options.height],
-            patch_size: options.patch_size,
-            camera_samples,
-            first_shot: fs.is_some(),
-            hemicube_resolution: options.hemicube_resolution,
-            light_window: options.light_window,
-            first_shot_pairs: fs.as_ref().map_or(0, |f| f.pairs),
-            first_shot_faces: fs.as_ref().map_or(0, |f| f.faces),
-            first_shot_ms: fs.as_ref().map_or(0.0, |f| f.ms),
-            bundle_resolution: options.bundle_resolution,
-            bundle_capacity: iteration_stats.capacity,
-            iteration_ms_median: iteration_stats.step_ms_median,
-            iteration_ms: iteration_stats.ms,
-            iterations: iteration_stats.steps,
-            seed: options.seed,
-            tessellation_ms: 0.0,
-            upload_ms,
-            image_ms,
-            total_ms: milliseconds(start),
-        },
-    })
+    Renderer::new(ctx, scene, patches, options, hooks)?.run(resume, hooks)
 }
 
-/// An image without iteration: emission and first shot, averaged over a stratified grid of
-/// camera samples per pixel.
-fn direct_image(
-    ctx: &Context,
-    scene: &Scene,
-    options: &RenderOptions,
-    buffers: &SceneBuffers,
-    camera: &CameraItemBuffer,
-    estimate: &ImageEstimate,
+/// One render, set up: the scene on the GPU, its first-shot table, the camera item buffer,
+/// the image sum and the iteration state, owned together. `step_stages` is the one
+/// description of a step, which `run` (the CLI and the tests), the benchmark harness and
+/// its stage profiler all use.
+pub struct Renderer<'a> {
+    ctx: &'a Context,
+    scene: &'a Scene,
+    options: RenderOptions,
+    buffers: SceneBuffers,
+    camera: CameraItemBuffer,
+    estimate: ImageEstimate,
+    /// The bundle stages; `None` for a first-shot-only image (`iterations == 0`).
+    iteration: Option<Iteration>,
+    first_shot: Option<FirstShotStats>,
+    /// Near distance of the camera's reversed-z projection.
     near: f64,
-) {
-    let per_axis = DIRECT_CAMERA_SAMPLES_PER_AXIS;
-    let mut rng = StepRng::new(options.seed, u64::MAX);
-    for k in 0..per_axis * per_axis {
-        let jitter = [
-            ((k % per_axis) as f64 + rng.uniform()) / per_axis as f64,
-            ((k / per_axis) as f64 + rng.uniform()) / per_axis as f64,
+    patch_count: usize,
+    light_samples: usize,
+    upload_ms: f64,
+    start: Instant,
+}
+
+impl<'a> Renderer<'a> {
+    /// Checks `options` against the scene and the device (before any GPU work), uploads the
+    /// scene and runs the first shot.
+    pub fn new(
+        ctx: &'a Context,
+        scene: &'a Scene,
+        patches: &Patches,
+        options: &RenderOptions,
+        hooks: &mut dyn Hooks,
+    ) -> Result<Self> {
+        let start = Instant::now();
+        check_options(scene, options)?;
+        check_limits(&ctx.limits(), patches, options)?;
+        let device = &ctx.device;
+        let upload = Instant::now();
+        let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
+        let camera = CameraItemBuffer::new(device, options.width, options.height);
+        let upload_ms = milliseconds(upload);
+        let first_shot = if !options.first_shot || patches.samples.is_empty() {
+            None
+        } else {
+            let stats = first_shot::run(ctx, &mut buffers, patches, options.hemicube_resolution, options.light_window)?;
+            hooks.phase("first shot", stats.ms);
+            Some(stats)
+        };
+        // Built after the first shot: it binds the first-shot table.
+        let estimate = ImageEstimate::new(device, &buffers, &camera);
+        let iteration = if options.iterations == 0 {
+            None
+        } else {
+            let capacity = options
+                .bundle_capacity
+                .unwrap_or_else(|| fragment_bound(patches, buffers.radius, options.bundle_resolution));
+            Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
+        };
+        Ok(Renderer {
+            ctx,
+            scene,
+            options: options.clone(),
+            near: buffers.radius * 1e-5,
+            buffers,
+            camera,
+            estimate,
+            iteration,
+            first_shot,
+            patch_count: patches.patches.len(),
+            light_samples: patches.samples.len(),
+            upload_ms,
+            start,
+        })
+    }
+
+    pub fn first_shot(&self) -> Option<&FirstShotStats> {
+        self.first_shot.as_ref()
+    }
+
+    pub fn patch_count(&self) -> u32 {
+        self.buffers.patch_count
+    }
+
+    fn iteration(&self) -> &Iteration {
+        self.iteration.as_ref().expect("a Renderer built with iterations > 0")
+    }
+
+    /// Fragment capacity of a bundle step and the bundle resolution.
+    pub fn bundle_size(&self) -> (u32, u32) {
+        let it = self.iteration();
+        (it.capacity, it.resolution)
+    }
+
+    fn bundle_scene(&self) -> BundleScene {
+        BundleScene {
+            centre: self.buffers.centre,
+            radius: self.buffers.radius,
+            patch_count: self.buffers.patch_count,
+            environment: self.scene.environment,
+        }
+    }
+
+    /// Writes the uniforms of step `k`: its bundle, then its camera sample (a uniform point
+    /// of every pixel, from the same generator). The estimate reads the state this step's
+    /// bundle stages have just written, so it always holds J.
+    pub fn write_step(&self, k: u32) {
+        let queue = &self.ctx.queue;
+        let mut rng = self.iteration().write_bundle(queue, self.options.seed, k as u64, &self.bundle_scene());
+        let jitter = [rng.uniform() as f32, rng.uniform() as f32];
+        self.write_camera(jitter);
+        self.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, true);
+    }
+
+    fn write_camera(&self, jitter: [f32; 2]) {
+        let (o, near) = (&self.options, self.near);
+        let cam = gpu_camera(&self.scene.camera, o.width, o.height, near, jitter);
+        self.ctx.queue.write_buffer(&self.camera.camera, 0, bytemuck::bytes_of(&cam));
+    }
+
+    /// The stages of one step, in order (its uniforms written by `write_step`): the bundle
+    /// stages of the iteration, then the camera item buffer and the image estimate.
+    pub fn step_stages(&self) -> Vec<Stage<'_>> {
+        let mut stages = self.iteration().stages(&self.buffers);
+        stages.extend(self.image_stages());
+        stages
+    }
+
+    /// The stages that add one estimate of every pixel to the image sum.
+    fn image_stages(&self) -> Vec<Stage<'_>> {
+        let (camera, estimate, buffers) = (&self.camera, &self.estimate, &self.buffers);
+        vec![
+            (
+                "camera",
+                Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
+            ),
+            ("estimate", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record(e))),
+        ]
+    }
+
+    /// Writes step `k`'s uniforms and submits the whole step in one command buffer.
+    pub fn submit_step(&self, k: u32) {
+        self.write_step(k);
+        self.submit(&self.step_stages(), "firstshot.render.step");
+    }
+
+    fn submit(&self, stages: &[Stage<'_>], label: &str) {
+        let mut encoder =
+            self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        for (_, record) in stages {
+            record(&mut encoder);
+        }
+        self.ctx.queue.submit([encoder.finish()]);
+    }
+
+    /// Step `k` stage by stage, each submitted and timed on its own (`gpu::profile`); it
+    /// leaves the same state as `submit_step`.
+    pub fn profile_step(&self, k: u32, timer: &StageTimer, before: Vec<Stage<'_>>) -> Result<Vec<StageTime>> {
+        self.write_step(k);
+        let mut stages = before;
+        stages.extend(self.step_stages());
+        timer.run(self.ctx, &stages)
+    }
+
+    /// Fragments (surfaces on lines) of the last step.
+    pub fn fragments(&self) -> Result<u64> {
+        self.iteration().fragments(self.ctx)
+    }
+
+    /// Whether a step since the last `clear_overflow` ran out of fragment room.
+    pub fn overflowed(&self) -> Result<bool> {
+        self.iteration().overflowed(self.ctx)
+    }
+
+    pub fn clear_overflow(&self) {
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        self.iteration().clear_overflow(&mut encoder);
+        self.ctx.queue.submit([encoder.finish()]);
+    }
+
+    /// The iteration state (J_j, win_j of every patch) as bytes.
+    pub fn read_state(&self) -> Result<Vec<u8>> {
+        let b = &self.buffers.state;
+        crate::gpu::buffers::read_back(&self.ctx.device, &self.ctx.queue, b, b.size())
+    }
+
+    /// The image so far: the mean of the estimates.
+    pub fn read_image(&self) -> Result<Image> {
+        let pixels = self.estimate.read_mean(&self.ctx.device, &self.ctx.queue)?;
+        Ok(Image::new(self.options.width, self.options.height, pixels))
+    }
+
+    /// Runs the render to its end (or until the hooks stop it) and reads the image back.
+    pub fn run(mut self, resume: Option<&Checkpoint>, hooks: &mut dyn Hooks) -> Result<Rendered> {
+        let image_start = Instant::now();
+        let mut iteration_stats = IterationStats::default();
+        let camera_samples = if self.options.iterations == 0 {
+            self.direct_image();
+            DIRECT_CAMERA_SAMPLES_PER_AXIS * DIRECT_CAMERA_SAMPLES_PER_AXIS
+        } else {
+            iteration_stats = self.iterate(resume, hooks)?;
+            hooks.phase("iteration", iteration_stats.ms);
+            iteration_stats.steps
+        };
+        let image = self.read_image()?;
+        let image_ms = milliseconds(image_start);
+        self.ctx.check()?;
+        let (o, fs) = (&self.options, self.first_shot.as_ref());
+        Ok(Rendered {
+            interrupted: iteration_stats.interrupted,
+            image,
+            stats: RenderStats {
+                adapter: self.ctx.summary.clone(),
+                scene: self.scene.source.display().to_string(),
+                patches: self.patch_count,
+                light_samples: self.light_samples,
+                image: [o.width, o.height],
+                patch_size: o.patch_size,
+                camera_samples,
+                first_shot: fs.is_some(),
+                hemicube_resolution: o.hemicube_resolution,
+                light_window: o.light_window,
+                first_shot_pairs: fs.map_or(0, |f| f.pairs),
+                first_shot_faces: fs.map_or(0, |f| f.faces),
+                first_shot_ms: fs.map_or(0.0, |f| f.ms),
+                bundle_resolution: o.bundle_resolution,
+                bundle_capacity: iteration_stats.capacity,
+                iteration_ms_median: iteration_stats.step_ms_median,
+                iteration_ms: iteration_stats.ms,
+                iterations: iteration_stats.steps,
+                seed: o.seed,
+                tessellation_ms: 0.0,
+                upload_ms: self.upload_ms,
+                image_ms,
+                total_ms: milliseconds(self.start),
+            },
+        })
+    }
+
+    /// An image without iteration: emission and first shot, averaged over a stratified grid
+    /// of camera samples per pixel.
+    fn direct_image(&self) {
+        let per_axis = DIRECT_CAMERA_SAMPLES_PER_AXIS;
+        let mut rng = StepRng::new(self.options.seed, u64::MAX);
+        self.estimate.set_params(&self.ctx.queue, self.scene.environment, self.buffers.patch_count, false);
+        for k in 0..per_axis * per_axis {
+            let jitter = [
+                ((k % per_axis) as f64 + rng.uniform()) / per_axis as f64,
+                ((k / per_axis) as f64 + rng.uniform()) / per_axis as f64,
+            ];
+            self.write_camera([jitter[0] as f32, jitter[1] as f32]);
+            self.submit(&self.image_stages(), "firstshot.render.direct_image");
+        }
+    }
+
+    fn checkpoint(&self, step: u32) -> Result<(Checkpoint, Image)> {
+        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
+        let image_sum = &self.estimate.image_sum;
+        let checkpoint = Checkpoint {
+            fingerprint: fingerprint(self.scene, &self.options),
+            step,
+            state: self.read_state()?,
+            image_sum: crate::gpu::buffers::read_back(device, queue, image_sum, image_sum.size())?,
+        };
+        Ok((checkpoint, self.read_image()?))
+    }
+
+    /// Puts a checkpoint's state and image sum on the GPU; returns its step. Its
+    /// fingerprint was checked where it was read (`main.rs`); the sizes guard the copies.
+    fn restore(&self, c: &Checkpoint) -> Result<u32> {
+        if c.state.len() as u64 != self.buffers.state.size()
+            || c.image_sum.len() as u64 != self.estimate.image_sum.size()
+        {
+            return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
+        }
+        self.ctx.queue.write_buffer(&self.buffers.state, 0, &c.state);
+        self.ctx.queue.write_buffer(&self.estimate.image_sum, 0, &c.image_sum);
+        Ok(c.step)
+    }
+
+    /// The stochastic iteration: `options.iterations` steps (or fewer if `time_limit` or the
+    /// hooks end it), each adding one image estimate. Steps run in batches; the state and
+    /// image sum are kept at each batch's start, so a batch in which a line ran out of
+    /// fragment room is redone, exactly, with a larger list.
+    fn iterate(&mut self, resume: Option<&Checkpoint>, hooks: &mut dyn Hooks) -> Result<IterationStats> {
+        let (ctx, options) = (self.ctx, self.options.clone());
+        let device = &ctx.device;
+        let started = Instant::now();
+        let mut step = match resume {
+            Some(c) => self.restore(c)?,
+            None => 0,
+        };
+        let backup = |b: &wgpu::Buffer, label: &str| {
+            let copy = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: b.size(),
+                usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            (b.clone(), copy)
+        };
+        let kept = [
+            backup(&self.buffers.state, "firstshot.render.state_backup"),
+            backup(&self.estimate.image_sum, "firstshot.render.image_backup"),
         ];
-        let cam = gpu_camera(&scene.camera, options.width, options.height, near, [jitter[0] as f32, jitter[1] as f32]);
-        ctx.queue.write_buffer(&camera.camera, 0, bytemuck::bytes_of(&cam));
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.direct_image") });
-        camera.record(&mut encoder, &buffers.vertices, buffers.patch_count);
-        estimate.record(&mut encoder);
-        ctx.queue.submit([encoder.finish()]);
+        let copy_all = |to_backup: bool| {
+            let mut encoder = device.create_command_encoder(&Default::default());
+            for (live, copy) in &kept {
+                let (from, to) = if to_backup { (live, copy) } else { (copy, live) };
+                encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
+            }
+            ctx.queue.submit([encoder.finish()]);
+        };
+        let mut batch_ms = Vec::new();
+        let mut interrupted = false;
+        while step < options.iterations && !interrupted {
+            if let Some(limit) = options.time_limit
+                && self.start.elapsed() >= limit
+            {
+                break;
+            }
+            let batch_start = Instant::now();
+            copy_all(true);
+            self.clear_overflow();
+            let mut batch = 0;
+            while batch < STEPS_PER_BATCH && step + batch < options.iterations {
+                self.submit_step(step + batch);
+                batch += 1;
+                if hooks.stop_requested() {
+                    interrupted = true;
+                    break;
+                }
+            }
+            let overflowed = self.overflowed()?;
+            ctx.check()?;
+            if overflowed {
+                // A line held more surfaces than the list had room for: restore the batch's
+                // start and redo it with twice the room.
+                copy_all(false);
+                let (capacity, resolution) = self.bundle_size();
+                let capacity = (capacity as u64).saturating_mul(2);
+                self.iteration = Some(Iteration::new(ctx, &self.buffers, resolution, capacity)?);
+                interrupted = false;
+                continue;
+            }
+            batch_ms.push(batch_start.elapsed().as_secs_f64() * 1e3 / batch as f64);
+            step += batch;
+            hooks.progress(step, options.iterations);
+            if hooks.checkpoint_due() {
+                let (checkpoint, image) = self.checkpoint(step)?;
+                hooks.checkpoint(checkpoint, &image)?;
+            }
+        }
+        ctx.wait()?;
+        if hooks.wants_final_checkpoint() && step > 0 {
+            let (checkpoint, image) = self.checkpoint(step)?;
+            hooks.checkpoint(checkpoint, &image)?;
+        }
+        batch_ms.sort_by(f64::total_cmp);
+        Ok(IterationStats {
+            steps: step,
+            capacity: self.bundle_size().0,
+            step_ms_median: batch_ms.get(batch_ms.len() / 2).copied().unwrap_or(0.0),
+            ms: started.elapsed().as_secs_f64() * 1e3,
+            interrupted,
+        })
     }
 }
 
@@ -332,148 +607,3 @@ struct IterationStats {
 
 /// Steps per batch between checks of the fragment overflow flag (each check waits for the GPU).
 const STEPS_PER_BATCH: u32 = 8;
-
-/// What the iteration works on.
-struct Run<'a> {
-    ctx: &'a Context,
-    scene: &'a Scene,
-    patches: &'a Patches,
-    options: &'a RenderOptions,
-    buffers: &'a SceneBuffers,
-    camera: &'a CameraItemBuffer,
-    estimate: &'a ImageEstimate,
-    near: f64,
-    start: Instant,
-}
-
-impl Run<'_> {
-    fn checkpoint(&self, step: u32) -> Result<(Checkpoint, Image)> {
-        let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let state: Vec<u8> =
-            crate::gpu::buffers::read_back(device, queue, &self.buffers.state, self.buffers.state.size())?;
-        let image_sum: Vec<u8> =
-            crate::gpu::buffers::read_back(device, queue, &self.estimate.image_sum, self.estimate.image_sum.size())?;
-        let pixels = self.estimate.read_mean(device, queue)?;
-        let checkpoint = Checkpoint { fingerprint: fingerprint(self.scene, self.options), step, state, image_sum };
-        Ok((checkpoint, Image::new(self.options.width, self.options.height, pixels)))
-    }
-}
-
-/// The stochastic iteration: `options.iterations` steps (or fewer if `time_limit` or the
-/// hooks end it), each adding one image estimate. Steps run in batches; the state and image
-/// sum are kept at each batch's start, so a batch in which a line ran out of fragment room
-/// is redone, exactly, with a larger list.
-fn iterate(run: &Run, resume: Option<&Checkpoint>, hooks: &mut dyn Hooks) -> Result<IterationStats> {
-    let Run { ctx, scene, patches, options, buffers, camera, estimate, near, start: run_start } = *run;
-    let device = &ctx.device;
-    let started = Instant::now();
-    let resolution = options.bundle_resolution;
-    let mut capacity = options
-        .bundle_capacity
-        .unwrap_or_else(|| crate::iteration::fragment_bound(patches, buffers.radius, resolution.max(4)));
-    let mut iteration = crate::iteration::Iteration::new(ctx, buffers, resolution, capacity)?;
-    let mut step = 0u32;
-    if let Some(c) = resume {
-        if c.fingerprint != fingerprint(scene, options) {
-            return Err(Error::Usage(
-                "the checkpoint belongs to another scene or other flags (patch size, resolutions, seed, image size, first shot); run with the same ones or without --resume".into(),
-            ));
-        }
-        if c.state.len() as u64 != buffers.state.size() || c.image_sum.len() as u64 != estimate.image_sum.size() {
-            return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
-        }
-        ctx.queue.write_buffer(&buffers.state, 0, &c.state);
-        ctx.queue.write_buffer(&estimate.image_sum, 0, &c.image_sum);
-        step = c.step;
-    }
-    let copy = |encoder: &mut wgpu::CommandEncoder, from: &wgpu::Buffer, to: &wgpu::Buffer| {
-        encoder.copy_buffer_to_buffer(from, 0, to, 0, from.size());
-    };
-    let backup = |b: &wgpu::Buffer, label: &str| {
-        device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: b.size(),
-            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        })
-    };
-    let state_backup = backup(&buffers.state, "firstshot.render.state_backup");
-    let image_backup = backup(&estimate.image_sum, "firstshot.render.image_backup");
-    estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, true);
-    let mut batch_ms = Vec::new();
-    let mut interrupted = false;
-    while step < options.iterations && !interrupted {
-        if let Some(limit) = options.time_limit
-            && run_start.elapsed() >= limit
-        {
-            break;
-        }
-        let batch_start = Instant::now();
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.snapshot") });
-        copy(&mut encoder, &buffers.state, &state_backup);
-        copy(&mut encoder, &estimate.image_sum, &image_backup);
-        iteration.clear_overflow(&mut encoder);
-        ctx.queue.submit([encoder.finish()]);
-        let mut batch = 0;
-        while batch < STEPS_PER_BATCH && step + batch < options.iterations {
-            let k = step + batch;
-            let (mut bundle, mut rng) =
-                crate::iteration::bundle_of_step(options.seed, k as u64, buffers.centre, buffers.radius, resolution);
-            bundle.environment = [scene.environment[0], scene.environment[1], scene.environment[2], 0.0];
-            bundle.patch_count = buffers.patch_count;
-            bundle.capacity = iteration.capacity;
-            bundle.use_state = (k > 0) as u32;
-            ctx.queue.write_buffer(&iteration.bundle, 0, bytemuck::bytes_of(&bundle));
-            let jitter = [rng.uniform() as f32, rng.uniform() as f32];
-            let cam = gpu_camera(&scene.camera, options.width, options.height, near, jitter);
-            ctx.queue.write_buffer(&camera.camera, 0, bytemuck::bytes_of(&cam));
-            let mut encoder =
-                device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.step") });
-            iteration.record_step(&mut encoder, buffers);
-            camera.record(&mut encoder, &buffers.vertices, buffers.patch_count);
-            estimate.record(&mut encoder);
-            ctx.queue.submit([encoder.finish()]);
-            batch += 1;
-            if hooks.stop_requested() {
-                interrupted = true;
-                break;
-            }
-        }
-        let overflowed = iteration.overflowed(ctx)?;
-        ctx.check()?;
-        if overflowed {
-            // A line held more surfaces than the list had room for: restore the batch's
-            // start and redo it with twice the room.
-            let mut encoder = device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.render.restore") });
-            copy(&mut encoder, &state_backup, &buffers.state);
-            copy(&mut encoder, &image_backup, &estimate.image_sum);
-            ctx.queue.submit([encoder.finish()]);
-            capacity = capacity.saturating_mul(2);
-            iteration = crate::iteration::Iteration::new(ctx, buffers, resolution, capacity)?;
-            interrupted = false;
-            continue;
-        }
-        batch_ms.push(batch_start.elapsed().as_secs_f64() * 1e3 / batch as f64);
-        step += batch;
-        hooks.progress(step, options.iterations);
-        if hooks.checkpoint_due() {
-            let (checkpoint, image) = run.checkpoint(step)?;
-            hooks.checkpoint(checkpoint, &image)?;
-        }
-    }
-    ctx.wait()?;
-    if hooks.wants_final_checkpoint() && step > 0 {
-        let (checkpoint, image) = run.checkpoint(step)?;
-        hooks.checkpoint(checkpoint, &image)?;
-    }
-    batch_ms.sort_by(f64::total_cmp);
-    Ok(IterationStats {
-        steps: step,
-        capacity: iteration.capacity,
-        step_ms_median: batch_ms.get(batch_ms.len() / 2).copied().unwrap_or(0.0),
-        ms: started.elapsed().as_secs_f64() * 1e3,
-        interrupted,
-    })
-}

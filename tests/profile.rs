@@ -5,22 +5,22 @@
 mod common;
 
 use common::*;
-use firstshot::gpu::buffers::read_back;
 use firstshot::gpu::context::list_adapters;
 use firstshot::gpu::profile::{StageTimer, TIMESTAMP_FEATURES};
-use firstshot::gpu::scene_buffers::SceneBuffers;
 use firstshot::gpu::{AdapterChoice, Context};
-use firstshot::iteration::{Iteration, bundle_of_step, fragment_bound};
-use firstshot::layout::GpuPatchState;
+use firstshot::render::{NoHooks, RenderOptions, Renderer};
 use firstshot::scene::{Material, MaterialKind, Patches};
 use glam::DVec3;
 
 const RESOLUTION: u32 = 64;
-const STAGES: [&str; 7] = ["clear", "reflect", "count", "prefix_sum", "fill", "transfer", "finalize"];
+const STAGES: [&str; 9] =
+    ["clear", "reflect", "count", "prefix_sum", "fill", "transfer", "finalize", "camera", "estimate"];
 
-/// A closed diffuse room with glowing walls: every step has work in every stage.
+/// A closed diffuse room with glowing walls, seen from inside: every step has work in
+/// every stage.
 fn room_scene() -> (firstshot::scene::Scene, Patches) {
     let mut scene = bare_scene();
+    scene.camera.position = DVec3::new(0.1, 0.0, -0.9);
     scene.materials = vec![Material { name: "wall".into(), kind: MaterialKind::Diffuse { albedo: [0.5; 3] } }];
     let tris: Vec<_> =
         room(DVec3::new(-1.0, -0.8, -1.2), DVec3::new(1.3, 0.9, 1.1)).into_iter().flat_map(|t| split(t, 3)).collect();
@@ -32,43 +32,44 @@ fn room_scene() -> (firstshot::scene::Scene, Patches) {
     (scene, patches)
 }
 
-/// Three steps, recorded whole or profiled stage by stage: the state's bits after them,
-/// the last step's fragments and the fragment bound.
-fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u32>, u64, u64) {
+/// Three steps, recorded whole or profiled stage by stage: the state's and the image's
+/// bits after them, the last step's fragments and the fragment bound.
+fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u64) {
     let (scene, patches) = room_scene();
-    let buffers = SceneBuffers::new(&ctx.device, &scene, &patches, false);
-    let bound = fragment_bound(&patches, buffers.radius, RESOLUTION);
-    let iteration = Iteration::new(ctx, &buffers, RESOLUTION, bound).unwrap();
+    let options = RenderOptions {
+        first_shot: false,
+        iterations: 3,
+        seed: 7,
+        bundle_resolution: RESOLUTION,
+        ..RenderOptions::from_scene(&scene)
+    };
+    let renderer = Renderer::new(ctx, &scene, &patches, &options, &mut NoHooks).unwrap();
     let timer = StageTimer::new(ctx, 16);
     for k in 0..3 {
-        let (mut bundle, _) = bundle_of_step(7, k, buffers.centre, buffers.radius, RESOLUTION);
-        bundle.patch_count = buffers.patch_count;
-        bundle.capacity = iteration.capacity;
-        bundle.use_state = (k > 0) as u32;
-        ctx.queue.write_buffer(&iteration.bundle, 0, bytemuck::bytes_of(&bundle));
         if profiled {
-            let times = iteration.profile_step(ctx, &buffers, &timer).unwrap();
+            let times = renderer.profile_step(k, &timer, vec![]).unwrap();
             let names: Vec<&str> = times.iter().map(|t| t.name).collect();
             assert_eq!(names, STAGES);
             assert!(times.iter().all(|t| t.wall_ms >= 0.0));
             assert_eq!(times.iter().all(|t| t.gpu_ms.is_some()), timer.has_timestamps());
         } else {
-            let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            iteration.record_step(&mut encoder, &buffers);
-            ctx.queue.submit([encoder.finish()]);
+            renderer.submit_step(k);
         }
     }
-    let size = (patches.patches.len() * std::mem::size_of::<GpuPatchState>()) as u64;
-    let state = read_back::<u32>(&ctx.device, &ctx.queue, &buffers.state, size).unwrap();
-    (state, iteration.fragments(ctx).unwrap(), bound)
+    // Without `bundle_capacity` the list's room is the geometric bound.
+    let bound = renderer.bundle_size().0 as u64;
+    let image = renderer.read_image().unwrap().pixels;
+    (renderer.read_state().unwrap(), image, renderer.fragments().unwrap(), bound)
 }
 
 #[test]
 fn test01_profiled_steps_compute_exactly_what_recorded_steps_do() {
     let Some(ctx) = gpu() else { return };
-    let (whole, fragments_whole, bound) = three_steps(&ctx, false);
-    let (profiled, fragments_profiled, _) = three_steps(&ctx, true);
+    let (whole, image_whole, fragments_whole, bound) = three_steps(&ctx, false);
+    let (profiled, image_profiled, fragments_profiled, _) = three_steps(&ctx, true);
     assert_eq!(whole, profiled, "stage by stage must leave the same state, bit for bit");
+    let bits = |image: &[[f32; 3]]| image.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&image_whole), bits(&image_profiled), "and the same image, bit for bit");
     assert_eq!(fragments_whole, fragments_profiled);
     // A closed room: every line through it crosses at least two walls, so a step has
     // fragments, and never more than the geometric bound.

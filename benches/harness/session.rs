@@ -1,21 +1,16 @@
-//! One scene set up on one adapter the way `render::render` sets it up (scene buffers, first
-//! shot, camera, image estimate, iteration), kept alive so that steps can be timed in
-//! batches, profiled stage by stage, and their fragments counted.
+//! One scene set up on one adapter by `render::Renderer`, kept alive so that steps can be
+//! timed in batches, profiled stage by stage, and their fragments counted.
 //!
 //! The headline numbers come from `render` itself; this exists for what `render` does not
 //! expose: each stage's time, the fragments of a step, and many steps on one first shot.
 
 use firstshot::Result;
-use firstshot::first_shot::{self, FirstShotStats};
+use firstshot::first_shot::FirstShotStats;
 use firstshot::gpu::Context;
 use firstshot::gpu::profile::{Stage, StageTime, StageTimer};
-use firstshot::gpu::scene_buffers::SceneBuffers;
-use firstshot::iteration::{Iteration, bundle_of_step, fragment_bound};
-use firstshot::layout::{GpuEstimateParams, GpuLightSample, GpuMaterial, GpuPatch, GpuPatchState, RasterVertex};
-use firstshot::render::{RenderOptions, check_limits};
+use firstshot::layout::{GpuLightSample, GpuMaterial, GpuPatch, GpuPatchState, RasterVertex};
+use firstshot::render::{NoHooks, RenderOptions, Renderer};
 use firstshot::scene::{Patches, Scene};
-use firstshot::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
-use firstshot::stages::image_estimate::ImageEstimate;
 use std::time::Instant;
 
 /// Times of batches of steps, per step, in ms.
@@ -34,113 +29,50 @@ pub const IDLE: &str = "idle";
 
 pub struct Session<'a> {
     ctx: &'a Context,
-    scene: &'a Scene,
-    options: RenderOptions,
-    buffers: SceneBuffers,
-    camera: CameraItemBuffer,
-    estimate: ImageEstimate,
-    iteration: Iteration,
-    near: f64,
-    next_step: u64,
+    renderer: Renderer<'a>,
+    pixels: f64,
+    next_step: u32,
     pub first_shot: Option<FirstShotStats>,
     pub pairs: u32,
 }
 
 impl<'a> Session<'a> {
     pub fn new(ctx: &'a Context, scene: &'a Scene, patches: &Patches, options: &RenderOptions) -> Result<Self> {
-        check_limits(&ctx.limits(), patches, options)?;
-        let device = &ctx.device;
-        let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
-        let camera = CameraItemBuffer::new(device, options.width, options.height);
-        let first_shot = if options.first_shot && !patches.samples.is_empty() {
-            Some(first_shot::run(ctx, &mut buffers, patches, options.hemicube_resolution, options.light_window)?)
-        } else {
-            None
-        };
-        let estimate = ImageEstimate::new(device, &buffers, &camera);
-        let e = scene.environment;
-        ctx.queue.write_buffer(
-            &estimate.params,
-            0,
-            bytemuck::bytes_of(&GpuEstimateParams {
-                environment: [e[0], e[1], e[2], 0.0],
-                patch_count: buffers.patch_count,
-                use_state: 1,
-                _pad: [0; 2],
-            }),
-        );
-        let resolution = options.bundle_resolution;
-        let capacity = fragment_bound(patches, buffers.radius, resolution.max(4));
-        let iteration = Iteration::new(ctx, &buffers, resolution, capacity)?;
-        let near = buffers.radius * 1e-5;
+        let options = RenderOptions { iterations: options.iterations.max(1), ..options.clone() };
+        let renderer = Renderer::new(ctx, scene, patches, &options, &mut NoHooks)?;
+        let first_shot = renderer.first_shot().cloned();
         Ok(Session {
             ctx,
-            scene,
-            options: options.clone(),
-            pairs: first_shot.as_ref().map_or(0, |f| f.pairs),
-            buffers,
-            camera,
-            estimate,
-            iteration,
-            near,
+            renderer,
+            pixels: options.width as f64 * options.height as f64,
             next_step: 0,
+            pairs: first_shot.as_ref().map_or(0, |f| f.pairs),
             first_shot,
         })
     }
 
     pub fn capacity(&self) -> u32 {
-        self.iteration.capacity
-    }
-
-    /// Writes the uniforms of the next step (as `render` does) and returns its index.
-    fn write_next(&mut self) -> u64 {
-        let k = self.next_step;
-        self.next_step += 1;
-        let b = &self.buffers;
-        let (mut bundle, mut rng) = bundle_of_step(self.options.seed, k, b.centre, b.radius, self.iteration.resolution);
-        let e = self.scene.environment;
-        bundle.environment = [e[0], e[1], e[2], 0.0];
-        bundle.patch_count = b.patch_count;
-        bundle.capacity = self.iteration.capacity;
-        bundle.use_state = (k > 0) as u32;
-        self.ctx.queue.write_buffer(&self.iteration.bundle, 0, bytemuck::bytes_of(&bundle));
-        let jitter = [rng.uniform() as f32, rng.uniform() as f32];
-        let cam = gpu_camera(&self.scene.camera, self.options.width, self.options.height, self.near, jitter);
-        self.ctx.queue.write_buffer(&self.camera.camera, 0, bytemuck::bytes_of(&cam));
-        k
-    }
-
-    /// The stages of a whole step as `render` records it: the iteration's, then the camera
-    /// item buffer and the image estimate.
-    fn stages(&self) -> Vec<Stage<'_>> {
-        let mut stages = self.iteration.stages(&self.buffers);
-        let (camera, estimate, buffers) = (&self.camera, &self.estimate, &self.buffers);
-        stages.push((
-            "camera",
-            Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
-        ));
-        stages.push(("estimate", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record(e))));
-        stages
+        self.renderer.bundle_size().0
     }
 
     /// Times `batches` batches of `size` steps, each batch submitted step by step and waited
     /// for once at its end (as `render` does).
     pub fn time_batches(&mut self, batches: usize, size: u32) -> Result<Batches> {
         let mut out = Batches::default();
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-        self.iteration.clear_overflow(&mut encoder);
-        self.ctx.queue.submit([encoder.finish()]);
+        self.renderer.clear_overflow();
         for _ in 0..batches {
             let start = Instant::now();
             let mut host = 0.0;
             for _ in 0..size {
                 let recording = Instant::now();
-                self.write_next();
+                let k = self.next_step;
+                self.next_step += 1;
+                self.renderer.write_step(k);
                 let mut encoder = self
                     .ctx
                     .device
                     .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.bench.step") });
-                for (_, record) in self.stages() {
+                for (_, record) in self.renderer.step_stages() {
                     record(&mut encoder);
                 }
                 let command = encoder.finish();
@@ -151,7 +83,7 @@ impl<'a> Session<'a> {
             out.step_ms.push(start.elapsed().as_secs_f64() * 1e3 / size as f64);
             out.host_ms.push(host * 1e3 / size as f64);
         }
-        if self.iteration.overflowed(self.ctx)? {
+        if self.renderer.overflowed()? {
             // Cannot happen with the geometric bound as capacity; say so if it ever does.
             return Err(firstshot::Error::Gpu("a bundle step overflowed its fragment list".into()));
         }
@@ -161,26 +93,26 @@ impl<'a> Session<'a> {
     /// One step, stage by stage; then the fragments it produced. The first entry, `idle`,
     /// is an empty submission: the round trip that every other entry's wall time includes.
     pub fn profile_step(&mut self, timer: &StageTimer) -> Result<(Vec<StageTime>, u64)> {
-        self.write_next();
-        let mut stages: Vec<Stage> = vec![(IDLE, Box::new(|_: &mut wgpu::CommandEncoder| {}))];
-        stages.extend(self.stages());
-        let times = timer.run(self.ctx, &stages)?;
-        Ok((times, self.iteration.fragments(self.ctx)?))
+        let k = self.next_step;
+        self.next_step += 1;
+        let idle: Vec<Stage> = vec![(IDLE, Box::new(|_: &mut wgpu::CommandEncoder| {}))];
+        let times = self.renderer.profile_step(k, timer, idle)?;
+        Ok((times, self.renderer.fragments()?))
     }
 
     /// Fragments of the last step.
     pub fn fragments(&self) -> Result<u64> {
-        self.iteration.fragments(self.ctx)
+        self.renderer.fragments()
     }
 
     /// The sizes the byte model needs.
     pub fn sizes(&self, fragments: u64) -> Sizes {
-        let r = self.iteration.resolution as f64;
+        let r = self.renderer.bundle_size().1 as f64;
         Sizes {
-            patches: self.buffers.patch_count as f64,
+            patches: self.renderer.patch_count() as f64,
             lines: r * r,
             fragments: fragments as f64,
-            pixels: self.options.width as f64 * self.options.height as f64,
+            pixels: self.pixels,
             pairs: self.pairs as f64,
         }
     }
