@@ -4,7 +4,7 @@
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{Context, buffers};
 use crate::layout::{FIXED_POINT_SCALE, GpuAppendParams, GpuFaceParams};
-use crate::scene::{LightSample, Patches};
+use crate::scene::{LightSample, Patches, SampleKind};
 use crate::stages::camera_item_buffer::{CameraItemBuffer, View};
 use crate::stages::first_shot_reduce::FirstShotReduce;
 use crate::stages::first_shot_table;
@@ -72,8 +72,8 @@ fn faces(sample: &LightSample, window: LightWindow, resolution: u32, near: f64) 
     };
     let full = |view: View| Face { view, rows: resolution };
     let cube_pixel = 4.0 / (resolution as f64 * resolution as f64);
-    match sample.normal {
-        None => {
+    match sample.kind {
+        SampleKind::Point => {
             let axes = [DVec3::X, -DVec3::X, DVec3::Y, -DVec3::Y, DVec3::Z, -DVec3::Z];
             let faces = axes
                 .iter()
@@ -81,7 +81,7 @@ fn faces(sample: &LightSample, window: LightWindow, resolution: u32, near: f64) 
                 .collect();
             (faces, cube_pixel)
         }
-        Some(n) => {
+        SampleKind::AreaVertex { normal: n } => {
             let (t1, t2) = orthonormal_frame(n);
             match window {
                 LightWindow::Hemicube => {
@@ -160,9 +160,9 @@ pub fn run(
                 face_count += 1;
             }
             let factor = pixel
-                * match sample.normal {
-                    None => 1.0 / (4.0 * std::f64::consts::PI),
-                    Some(_) => sample.weight,
+                * match sample.kind {
+                    SampleKind::Point => 1.0 / (4.0 * std::f64::consts::PI),
+                    SampleKind::AreaVertex { .. } => sample.weight,
                 }
                 / FIXED_POINT_SCALE as f64;
             let append = GpuAppendParams {

@@ -24,6 +24,13 @@ pub const FRAGMENT_FRONT_BIT: u32 = 1 << 31;
 /// runs keep the barrier-bound workgroup scan a small share of the work on CPU adapters).
 pub const PREFIX_SUM_WORKGROUP: u32 = 256;
 pub const PREFIX_SUM_PER_THREAD: u32 = 16;
+/// `LightSample::kind`: what a first-shot light sample is (`scene::SampleKind`).
+pub const LIGHT_POINT: u32 = 0;
+pub const LIGHT_AREA_VERTEX: u32 = 1;
+/// `Material::kind`: which BRDF a material evaluates (`scene::MaterialKind`). A max-Phong
+/// material without a specular lobe is uploaded as diffuse: it is exactly Lambertian.
+pub const MATERIAL_DIFFUSE: u32 = 0;
+pub const MATERIAL_PHONG: u32 = 1;
 /// The most patches a scene may have (ids must leave the twin bit free).
 pub const MAX_PATCHES: u32 = 1 << 27;
 
@@ -56,18 +63,24 @@ pub struct GpuMaterial {
     pub diffuse: [f32; 4],
     /// rgb: ks; w: shininess n.
     pub specular: [f32; 4],
+    /// `MATERIAL_*`.
+    pub kind: u32,
+    pub _pad: [u32; 3],
 }
 
 /// One light sample y_i of the first shot. WGSL: `LightSample`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
 pub struct GpuLightSample {
-    /// xyz: y_i; w: 0 for a point light, 1 for an area-light vertex.
+    /// xyz: y_i.
     pub position: [f32; 4],
     /// xyz: the area light's normal n_L; w: trapezoid weight w_i.
     pub normal: [f32; 4],
     /// rgb: S_i (power of a point light, radiance of an area light).
     pub strength: [f32; 4],
+    /// `LIGHT_*`.
+    pub kind: u32,
+    pub _pad: [u32; 3],
 }
 
 /// Iteration state of one patch (DESIGN.md 2): J_j and the direction win_j it travelled.
@@ -205,8 +218,8 @@ macro_rules! layout {
 pub fn shared_layouts() -> Vec<StructLayout> {
     vec![
         layout!(GpuPatch => "Patch" { v0, v1, v2, normal, emission, material, flags }),
-        layout!(GpuMaterial => "Material" { diffuse, specular }),
-        layout!(GpuLightSample => "LightSample" { position, normal, strength }),
+        layout!(GpuMaterial => "Material" { diffuse, specular, kind }),
+        layout!(GpuLightSample => "LightSample" { position, normal, strength, kind }),
         layout!(GpuPatchState => "PatchState" { incoming, direction }),
         layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),
         layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, use_state }),
@@ -225,6 +238,10 @@ pub fn wgsl_constants() -> String {
          const NO_PATCH: u32 = {NO_PATCH}u;\n\
          const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
+         const LIGHT_POINT: u32 = {LIGHT_POINT}u;\n\
+         const LIGHT_AREA_VERTEX: u32 = {LIGHT_AREA_VERTEX}u;\n\
+         const MATERIAL_DIFFUSE: u32 = {MATERIAL_DIFFUSE}u;\n\
+         const MATERIAL_PHONG: u32 = {MATERIAL_PHONG}u;\n\
          const PREFIX_SUM_WORKGROUP: u32 = {PREFIX_SUM_WORKGROUP}u;\n\
          const PREFIX_SUM_PER_THREAD: u32 = {PREFIX_SUM_PER_THREAD}u;\n\
          const PI: f32 = {pi:?};\n\

@@ -74,7 +74,7 @@ fn test03_area_light_vertex_in_a_closed_room_integrates_the_cosine() {
     let weight = 0.37;
     let sample = firstshot::scene::LightSample {
         position: DVec3::new(0.1, 0.6, -0.2),
-        normal: Some(normal),
+        kind: firstshot::scene::SampleKind::AreaVertex { normal },
         strength: [1.0; 3],
         weight,
         light: 0,

@@ -3,7 +3,7 @@
 
 use super::buffers;
 use crate::layout::*;
-use crate::scene::{MaterialKind, PatchKind, Patches, Scene};
+use crate::scene::{MaterialKind, PatchKind, Patches, SampleKind, Scene};
 use glam::DVec3;
 
 /// GPU copies of the tessellated scene.
@@ -30,12 +30,17 @@ pub fn gpu_materials(scene: &Scene) -> Vec<GpuMaterial> {
         .materials
         .iter()
         .map(|m| match m.kind {
-            MaterialKind::Diffuse { albedo } => {
-                GpuMaterial { diffuse: [albedo[0], albedo[1], albedo[2], 0.0], specular: [0.0; 4] }
-            }
+            MaterialKind::Diffuse { albedo } => GpuMaterial {
+                diffuse: [albedo[0], albedo[1], albedo[2], 0.0],
+                specular: [0.0; 4],
+                kind: MATERIAL_DIFFUSE,
+                _pad: [0; 3],
+            },
             MaterialKind::Phong { diffuse, specular, shininess } => GpuMaterial {
                 diffuse: [diffuse[0], diffuse[1], diffuse[2], 0.0],
                 specular: [specular[0], specular[1], specular[2], shininess],
+                kind: if specular == [0.0; 3] { MATERIAL_DIFFUSE } else { MATERIAL_PHONG },
+                _pad: [0; 3],
             },
         })
         .collect();
@@ -94,9 +99,20 @@ pub fn gpu_samples(patches: &Patches) -> Vec<GpuLightSample> {
         .samples
         .iter()
         .map(|s| GpuLightSample {
-            position: v4(s.position, if s.normal.is_some() { 1.0 } else { 0.0 }),
-            normal: v4(s.normal.unwrap_or(DVec3::ZERO), s.weight),
+            position: v4(s.position, 0.0),
+            normal: v4(
+                match s.kind {
+                    SampleKind::Point => DVec3::ZERO,
+                    SampleKind::AreaVertex { normal } => normal,
+                },
+                s.weight,
+            ),
             strength: [s.strength[0], s.strength[1], s.strength[2], 0.0],
+            kind: match s.kind {
+                SampleKind::Point => LIGHT_POINT,
+                SampleKind::AreaVertex { .. } => LIGHT_AREA_VERTEX,
+            },
+            _pad: [0; 3],
         })
         .collect()
 }

@@ -13,7 +13,7 @@ use glam::DVec3;
 use std::path::PathBuf;
 
 pub use load::load;
-pub use tessellate::{LightSample, Patch, PatchKind, Patches, tessellate};
+pub use tessellate::{LightSample, Patch, PatchKind, Patches, SampleKind, tessellate};
 
 /// Linear RGB, one value per channel.
 pub type Rgb = [f32; 3];

@@ -48,9 +48,7 @@ pub struct Patch {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LightSample {
     pub position: DVec3,
-    /// `None` for a point light (full cube window); the area light's unit normal otherwise
-    /// (hemicube window above it).
-    pub normal: Option<DVec3>,
+    pub kind: SampleKind,
     /// S_i: the power of a point light, the radiance of an area light.
     pub strength: Rgb,
     /// w_i: for an area-light vertex, (area of the light triangles sharing it) / 3; 1 for a
@@ -58,6 +56,16 @@ pub struct LightSample {
     pub weight: f64,
     /// Index into `Scene::lights`.
     pub light: u32,
+}
+
+/// What a light sample is, which decides its window and its weight in the first shot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SampleKind {
+    /// A point light: a full cube window, S_i = power.
+    Point,
+    /// A vertex of an area light's mesh, with the light's unit normal: a window above the
+    /// light, S_i = radiance, the trapezoid weight in `LightSample::weight`.
+    AreaVertex { normal: DVec3 },
 }
 
 /// The tessellated scene.
@@ -170,9 +178,13 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
     }
     for (l, light) in scene.lights.iter().enumerate() {
         match *light {
-            Light::Point { position, power } => {
-                out.samples.push(LightSample { position, normal: None, strength: power, weight: 1.0, light: l as u32 })
-            }
+            Light::Point { position, power } => out.samples.push(LightSample {
+                position,
+                kind: SampleKind::Point,
+                strength: power,
+                weight: 1.0,
+                light: l as u32,
+            }),
             Light::Area { vertices, radiance, subdivisions } => {
                 mesh_area_light(scene, l, vertices, radiance, subdivisions, &mut out)?
             }
@@ -298,7 +310,7 @@ fn mesh_area_light(
             let position = (1.0 - v) * ((1.0 - u) * v0 + u * v1) + v * ((1.0 - u) * v3 + u * v2);
             out.samples.push(LightSample {
                 position,
-                normal: Some(normal),
+                kind: SampleKind::AreaVertex { normal },
                 strength: radiance,
                 weight: 0.0,
                 light: l as u32,
@@ -518,7 +530,7 @@ pub(crate) mod tests {
                     (true, true) => h2 / 6.0,
                 };
                 assert!((s.weight - expected).abs() <= ROUNDING * h2, "({i}, {j})");
-                assert_eq!(s.normal, Some(DVec3::NEG_Y));
+                assert_eq!(s.kind, SampleKind::AreaVertex { normal: DVec3::NEG_Y });
                 assert_eq!(s.strength, [10.0, 20.0, 30.0]);
                 assert_eq!(s.light, 0);
             }
@@ -563,7 +575,8 @@ pub(crate) mod tests {
             assert!((weights - area).abs() <= ROUNDING * area, "{weights} vs {area}");
             assert!((patch_area - area).abs() <= ROUNDING * area);
             for s in &patches.samples {
-                assert!(s.normal.unwrap().dot(normal) > 1.0 - 1e-12);
+                let SampleKind::AreaVertex { normal: n } = s.kind else { panic!("an area-light sample") };
+                assert!(n.dot(normal) > 1.0 - 1e-12);
                 assert!((s.position - v0).dot(normal).abs() <= ROUNDING);
                 assert!(s.weight > 0.0);
             }
@@ -583,7 +596,7 @@ pub(crate) mod tests {
             sample,
             LightSample {
                 position: DVec3::new(1.0, 2.0, 3.0),
-                normal: None,
+                kind: SampleKind::Point,
                 strength: [5.0, 6.0, 7.0],
                 weight: 1.0,
                 light: 1,

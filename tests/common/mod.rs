@@ -98,7 +98,7 @@ pub fn room(lo: DVec3, hi: DVec3) -> Vec<[DVec3; 3]> {
 }
 
 pub fn point_sample(position: DVec3) -> LightSample {
-    LightSample { position, normal: None, strength: [1.0; 3], weight: 1.0, light: 0 }
+    LightSample { position, kind: firstshot::scene::SampleKind::Point, strength: [1.0; 3], weight: 1.0, light: 0 }
 }
 
 pub fn patches_of(triangles: &[[DVec3; 3]], samples: Vec<LightSample>) -> Patches {

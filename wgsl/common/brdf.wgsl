@@ -11,7 +11,7 @@ fn brdf(m: Material, n: vec3<f32>, w_in: vec3<f32>, w_out: vec3<f32>) -> vec3<f3
     }
     var f = m.diffuse.rgb / PI;
     let ks = m.specular.rgb;
-    if (any(ks > vec3<f32>(0.0))) {
+    if (m.kind == MATERIAL_PHONG) {
         let shininess = m.specular.w;
         let mirror = 2.0 * cos_in * n - w_in;
         let cos_psi = dot(mirror, w_out);

@@ -18,13 +18,21 @@ struct Patch {
 struct Material {
     diffuse: vec4<f32>,  // rgb kd
     specular: vec4<f32>, // rgb ks, w shininess
+    kind: u32,           // MATERIAL_*
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // A first-shot light sample (Rust: GpuLightSample).
 struct LightSample {
-    position: vec4<f32>, // xyz y_i, w 0 point / 1 area vertex
+    position: vec4<f32>, // xyz y_i
     normal: vec4<f32>,   // xyz n_L, w trapezoid weight
     strength: vec4<f32>, // rgb S_i
+    kind: u32,           // LIGHT_*
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // Iteration state of a patch (Rust: GpuPatchState).
