@@ -48,9 +48,9 @@ pub struct FirstShotStats {
 }
 
 /// One face to render: its view, the rows that lie in the window.
-struct Face {
-    view: View,
-    rows: u32,
+pub(crate) struct Face {
+    pub view: View,
+    pub rows: u32,
 }
 
 fn orthonormal_frame(n: DVec3) -> (DVec3, DVec3) {
@@ -60,7 +60,7 @@ fn orthonormal_frame(n: DVec3) -> (DVec3, DVec3) {
 
 /// The faces around `sample` at `resolution` pixels per face edge, and the solid angle
 /// of a face's centre pixel (the same for all of them).
-fn faces(sample: &LightSample, window: LightWindow, resolution: u32, near: f64) -> (Vec<Face>, f64) {
+pub(crate) fn faces(sample: &LightSample, window: LightWindow, resolution: u32, near: f64) -> (Vec<Face>, f64) {
     let view = |forward: DVec3, up: DVec3, tan: f64, centre: [f64; 2]| View {
         eye: sample.position,
         forward,

@@ -92,6 +92,15 @@ pub fn fragment_bound(patches: &Patches, radius: f64, resolution: u32) -> u64 {
         .sum()
 }
 
+/// What the image estimate reads of a step to gather per pixel: the bundle, its sorted
+/// lines (offsets and fragments) and the patches' outgoing radiance O_j.
+pub struct GatherBuffers {
+    pub bundle: wgpu::Buffer,
+    pub offsets: wgpu::Buffer,
+    pub fragments: wgpu::Buffer,
+    pub outgoing: wgpu::Buffer,
+}
+
 /// The buffers and stages of a step.
 pub struct Iteration {
     bundle: wgpu::Buffer,
@@ -107,6 +116,7 @@ pub struct Iteration {
     finalize: BundleFinalize,
     pub capacity: u32,
     pub resolution: u32,
+    pub gather: GatherBuffers,
     _owned: Vec<wgpu::Buffer>,
 }
 
@@ -160,6 +170,12 @@ impl Iteration {
                 [&bundle, &scene.patches, &sums, &max_bits, &outgoing, &scene.state],
                 scene.patch_count,
             ),
+            gather: GatherBuffers {
+                bundle: bundle.clone(),
+                offsets: offsets.clone(),
+                fragments: fragments.clone(),
+                outgoing: outgoing.clone(),
+            },
             bundle,
             counts,
             cursor,

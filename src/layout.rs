@@ -24,9 +24,10 @@ pub const FRAGMENT_FRONT_BIT: u32 = 1 << 31;
 /// runs keep the barrier-bound workgroup scan a small share of the work on CPU adapters).
 pub const PREFIX_SUM_WORKGROUP: u32 = 256;
 pub const PREFIX_SUM_PER_THREAD: u32 = 16;
-/// `LightSample::kind`: what a first-shot light sample is (`scene::SampleKind`).
+/// `LightSample::kind` and `DirectLight::kind`: a point light, or a point on an area light
+/// (a vertex of its mesh in the first shot, a point drawn on it in the direct light).
 pub const LIGHT_POINT: u32 = 0;
-pub const LIGHT_AREA_VERTEX: u32 = 1;
+pub const LIGHT_AREA: u32 = 1;
 /// `Material::kind`: which BRDF a material evaluates (`scene::MaterialKind`). A max-Phong
 /// material without a specular lobe is uploaded as diffuse: it is exactly Lambertian.
 pub const MATERIAL_DIFFUSE: u32 = 0;
@@ -121,9 +122,44 @@ pub struct GpuEstimateParams {
     pub environment: [f32; 4],
     /// Number of patches (ids at or above are invalid).
     pub patch_count: u32,
-    /// 1 when the iteration state holds J (after step 1), 0 before.
-    pub use_state: u32,
-    pub _pad: [u32; 2],
+    /// Entries of the direct-light table.
+    pub light_count: u32,
+    /// 1 when this pass gathers indirect light through the step's bundle, 0 for a
+    /// direct-light-only pass.
+    pub gather: u32,
+    pub _pad: u32,
+}
+
+/// A light as the per-pixel direct light sees it in one pass (DESIGN.md 6). WGSL:
+/// `DirectLight`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuDirectLight {
+    /// xyz: the point light's position, or this pass's point y on the area light.
+    pub position: [f32; 4],
+    /// xyz: the area light's unit normal n_L (zero for a point light).
+    pub normal: [f32; 4],
+    /// rgb: what multiplies V f cos / r^2: a point light's intensity power / (4 pi); for an
+    /// area light, its radiance times the area this pass's point stands for (cos_L too).
+    pub strength: [f32; 4],
+    /// `LIGHT_*`.
+    pub kind: u32,
+    /// The faces of the light's window in the face table: `first_face..first_face + faces`.
+    pub first_face: u32,
+    pub faces: u32,
+    pub _pad: u32,
+}
+
+/// One face of a light's window in the shadow atlas: a view, and where its item buffer lies.
+/// WGSL: `WindowFace`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuWindowFace {
+    /// The face's view (`size` = its full square in pixels, `jitter` = texel centres).
+    pub view: GpuCamera,
+    /// x, y: the tile's top-left texel in the atlas; z: rows of the face in the window (the
+    /// half faces of a hemicube stop early).
+    pub tile: [u32; 4],
 }
 
 /// One face of a light sample's window, for the first-shot reduction.
@@ -199,6 +235,8 @@ assert_size_multiple_of_16!(
     GpuPatchState,
     GpuCamera,
     GpuEstimateParams,
+    GpuDirectLight,
+    GpuWindowFace,
     GpuFaceParams,
     GpuAppendParams,
     GpuBundle,
@@ -222,7 +260,9 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuLightSample => "LightSample" { position, normal, strength, kind }),
         layout!(GpuPatchState => "PatchState" { incoming, direction }),
         layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),
-        layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, use_state }),
+        layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count, gather }),
+        layout!(GpuDirectLight => "DirectLight" { position, normal, strength, kind, first_face, faces }),
+        layout!(GpuWindowFace => "WindowFace" { view, tile }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
         layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
         layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state }),
@@ -239,7 +279,7 @@ pub fn wgsl_constants() -> String {
          const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
          const LIGHT_POINT: u32 = {LIGHT_POINT}u;\n\
-         const LIGHT_AREA_VERTEX: u32 = {LIGHT_AREA_VERTEX}u;\n\
+         const LIGHT_AREA: u32 = {LIGHT_AREA}u;\n\
          const MATERIAL_DIFFUSE: u32 = {MATERIAL_DIFFUSE}u;\n\
          const MATERIAL_PHONG: u32 = {MATERIAL_PHONG}u;\n\
          const PREFIX_SUM_WORKGROUP: u32 = {PREFIX_SUM_WORKGROUP}u;\n\

@@ -12,6 +12,7 @@
 //!    the running mean, written by `image` as EXR + PNG.
 
 pub mod checkpoint;
+pub mod direct_light;
 pub mod error;
 pub mod first_shot;
 pub mod scene;

@@ -74,6 +74,18 @@ struct RenderArgs {
     /// The window around area-light samples: hemicube | tetrahedron.
     #[arg(long, value_name = "W")]
     light_window: Option<LightWindow>,
+    /// Pixels along a full face edge of the lights' windows for the per-pixel direct light
+    /// (default: the hemicube resolution).
+    #[arg(long, value_name = "R")]
+    shadow_resolution: Option<u32>,
+    /// Passes of a direct-light image (--iterations 0), each a new camera sample per pixel
+    /// and new points on the area lights.
+    #[arg(long, value_name = "N")]
+    direct_passes: Option<u32>,
+    /// Steps that advance the iteration state before any is averaged into the image
+    /// (default: from the scene's albedo).
+    #[arg(long, value_name = "N")]
+    burn_in: Option<u32>,
     /// Image width in pixels.
     #[arg(long, value_name = "W")]
     width: Option<u32>,
@@ -330,6 +342,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         ("--height", args.height),
         ("--hemicube-resolution", args.hemicube_resolution),
         ("--bundle-resolution", args.bundle_resolution),
+        ("--shadow-resolution", args.shadow_resolution),
     ] {
         if let Some(v) = v
             && !(1..=16384).contains(&v)
@@ -341,6 +354,14 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     options.height = args.height.unwrap_or(options.height);
     options.hemicube_resolution = args.hemicube_resolution.unwrap_or(options.hemicube_resolution);
     options.bundle_resolution = args.bundle_resolution.unwrap_or(options.bundle_resolution);
+    options.shadow_resolution = args.shadow_resolution.unwrap_or(options.hemicube_resolution);
+    if let Some(v) = args.direct_passes {
+        if v == 0 {
+            return Err(usage("--direct-passes 0: expected at least 1 pass".into()));
+        }
+        options.direct_passes = v;
+    }
+    options.burn_in = args.burn_in.or(options.burn_in);
     let (exr_path, png_path) = output_paths(&args, &scene_path)?;
     firstshot::render::check_options(&scene, &options)?;
     say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));

@@ -2,6 +2,7 @@
 //! -> image. `main.rs` and the tests call `render`.
 
 use crate::checkpoint::Checkpoint;
+use crate::direct_light::DirectLights;
 use crate::first_shot::{self, FirstShotStats, LightWindow};
 use crate::gpu::profile::{Stage, StageTime, StageTimer};
 use crate::gpu::scene_buffers::SceneBuffers;
@@ -17,9 +18,16 @@ use crate::{Error, Result};
 use serde::Serialize;
 use std::time::Instant;
 
-/// Camera samples per pixel (a stratified 8 x 8 grid) of an image without iteration, so
-/// that its edges are anti-aliased like the references.
-pub const DIRECT_CAMERA_SAMPLES_PER_AXIS: u32 = 8;
+/// Passes of an image without iteration (`--direct-passes`): each a camera sample per
+/// pixel (stratified) and a point on every area light (stratified over its triangles), so
+/// that edges are anti-aliased like the references and penumbrae converge.
+pub const DEFAULT_DIRECT_PASSES: u32 = 64;
+
+/// The burn-in leaves out of the image the steps before the state J carries all but this
+/// share of the light of further bounces.
+pub const BURN_IN_TOLERANCE: f64 = 0.01;
+/// At most this many burn-in steps, whatever the albedo.
+pub const MAX_BURN_IN: u32 = 100;
 
 /// What a render is asked to do; `from_scene` takes the scene's `[settings]`, flags then
 /// override fields.
@@ -42,6 +50,14 @@ pub struct RenderOptions {
     /// Initial fragment room of a bundle step; `None` takes the geometric bound, which no
     /// step exceeds. Tests set it small to exercise the overflow-and-redo path.
     pub bundle_capacity: Option<u64>,
+    /// Pixels along a full face edge of the lights' windows for the per-pixel direct light
+    /// (less if the shadow memory budget needs it).
+    pub shadow_resolution: u32,
+    /// Passes of an image without iteration.
+    pub direct_passes: u32,
+    /// Steps that advance the state before any is averaged into the image; `None`: from
+    /// the scene's albedo (`default_burn_in`).
+    pub burn_in: Option<u32>,
 }
 
 impl RenderOptions {
@@ -58,8 +74,38 @@ impl RenderOptions {
             first_shot: true,
             time_limit: None,
             bundle_capacity: None,
+            shadow_resolution: scene.settings.hemicube_resolution,
+            direct_passes: DEFAULT_DIRECT_PASSES,
+            burn_in: None,
         }
     }
+}
+
+/// Burn-in steps for `scene`: the state's missing share of further bounces falls as a^k with
+/// a the largest hemispherical albedo (directional albedo averaged over cosine-weighted
+/// incidence) of its materials, so k = log(BURN_IN_TOLERANCE) / log(a), at most MAX_BURN_IN.
+pub fn default_burn_in(scene: &Scene) -> u32 {
+    const POINTS: usize = 32;
+    let a = scene
+        .materials
+        .iter()
+        .map(|m| {
+            // Midpoint rule of 2 int a(mu) mu dmu over [0, 1].
+            let mean: [f64; 3] = (0..POINTS).fold([0.0; 3], |acc, i| {
+                let mu = (i as f64 + 0.5) / POINTS as f64;
+                let a = crate::scene::brdf::directional_albedo(&m.kind, mu);
+                std::array::from_fn(|c| acc[c] + a[c] * 2.0 * mu / POINTS as f64)
+            });
+            mean.into_iter().fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max);
+    if a <= 0.0 {
+        return 0;
+    }
+    if a >= 1.0 {
+        return MAX_BURN_IN;
+    }
+    ((BURN_IN_TOLERANCE.ln() / a.ln()).ceil() as u32).min(MAX_BURN_IN)
 }
 
 /// Run statistics (`--stats`, CLI.md).
@@ -79,13 +125,20 @@ pub struct RenderStats {
     pub first_shot_pairs: u32,
     pub first_shot_faces: usize,
     pub first_shot_ms: f64,
+    /// Face side of the lights' windows for the per-pixel direct light, and the texels of
+    /// their atlases.
+    pub shadow_resolution: u32,
+    pub shadow_atlas_texels: u64,
     pub bundle_resolution: u32,
     /// Fragment capacity of a bundle step (grown if a step ever needed more).
     pub bundle_capacity: u32,
     /// Median wall time of a step, measured over batches of steps.
     pub iteration_ms_median: f64,
     pub iteration_ms: f64,
+    /// Steps averaged into the image.
     pub iterations: u32,
+    /// Steps before them that only advanced the state.
+    pub burn_in_steps: u32,
     pub seed: u64,
     pub tessellation_ms: f64,
     pub upload_ms: f64,
@@ -239,9 +292,12 @@ pub struct Renderer<'a> {
     options: RenderOptions,
     buffers: SceneBuffers,
     camera: CameraItemBuffer,
+    direct: DirectLights,
     estimate: ImageEstimate,
     /// The bundle stages; `None` for a first-shot-only image (`iterations == 0`).
     iteration: Option<Iteration>,
+    /// Steps before the first one averaged into the image.
+    burn_in: u32,
     first_shot: Option<FirstShotStats>,
     /// Near distance of the camera's reversed-z projection.
     near: f64,
@@ -276,8 +332,16 @@ impl<'a> Renderer<'a> {
             hooks.phase("first shot", stats.ms);
             Some(stats)
         };
-        // Built after the first shot: it binds the first-shot table.
-        let estimate = ImageEstimate::new(device, &buffers, &camera);
+        let direct = DirectLights::new(
+            ctx,
+            scene,
+            patches,
+            &buffers,
+            options.first_shot,
+            options.light_window,
+            options.shadow_resolution,
+            options.seed,
+        );
         let iteration = if options.iterations == 0 {
             None
         } else {
@@ -286,6 +350,12 @@ impl<'a> Renderer<'a> {
                 .unwrap_or_else(|| fragment_bound(patches, buffers.radius, options.bundle_resolution));
             Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
         };
+        let estimate =
+            ImageEstimate::new(device, &buffers, &camera, &direct, iteration.as_ref().map(|i| &i.gather));
+        let burn_in = match options.iterations {
+            0 => 0,
+            _ => options.burn_in.unwrap_or_else(|| default_burn_in(scene)),
+        };
         Ok(Renderer {
             ctx,
             scene,
@@ -293,8 +363,10 @@ impl<'a> Renderer<'a> {
             near: buffers.radius * 1e-5,
             buffers,
             camera,
+            direct,
             estimate,
             iteration,
+            burn_in,
             first_shot,
             patch_count: patches.patches.len(),
             light_samples: patches.samples.len(),
@@ -330,15 +402,23 @@ impl<'a> Renderer<'a> {
         }
     }
 
-    /// Writes the uniforms of step `k`: its bundle, then its camera sample (a uniform point
-    /// of every pixel, from the same generator). The estimate reads the state this step's
-    /// bundle stages have just written, so it always holds J.
-    pub fn write_step(&self, k: u32) {
+    /// Steps before the first one averaged into the image.
+    pub fn burn_in(&self) -> u32 {
+        self.burn_in
+    }
+
+    /// Writes the uniforms of step `k`: its bundle, then, once past the burn-in, its camera
+    /// sample (a uniform point of every pixel) and its points on the area lights, all from
+    /// the step's own generator.
+    pub fn write_step(&mut self, k: u32) {
         let queue = &self.ctx.queue;
         let mut rng = self.iteration().write_bundle(queue, self.options.seed, k as u64, &self.bundle_scene());
-        let jitter = [rng.uniform() as f32, rng.uniform() as f32];
-        self.write_camera(jitter);
-        self.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, true);
+        if k >= self.burn_in {
+            let jitter = [rng.uniform() as f32, rng.uniform() as f32];
+            self.write_camera(jitter);
+            self.direct.prepare_pass(queue, (k - self.burn_in) as u64);
+            self.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, self.direct.count(), true);
+        }
     }
 
     fn write_camera(&self, jitter: [f32; 2]) {
@@ -347,18 +427,22 @@ impl<'a> Renderer<'a> {
         self.ctx.queue.write_buffer(&self.camera.camera, 0, bytemuck::bytes_of(&cam));
     }
 
-    /// The stages of one step, in order (its uniforms written by `write_step`): the bundle
-    /// stages of the iteration, then the camera item buffer and the image estimate.
-    pub fn step_stages(&self) -> Vec<Stage<'_>> {
+    /// The stages of step `k`, in order (its uniforms written by `write_step`): the bundle
+    /// stages of the iteration, then, past the burn-in, the image stages.
+    pub fn step_stages(&self, k: u32) -> Vec<Stage<'_>> {
         let mut stages = self.iteration().stages(&self.buffers);
-        stages.extend(self.image_stages());
+        if k >= self.burn_in {
+            stages.extend(self.image_stages());
+        }
         stages
     }
 
-    /// The stages that add one estimate of every pixel to the image sum.
+    /// The stages that add one estimate of every pixel to the image sum: the area lights'
+    /// windows at this pass's points, the camera item buffer, the estimate.
     fn image_stages(&self) -> Vec<Stage<'_>> {
-        let (camera, estimate, buffers) = (&self.camera, &self.estimate, &self.buffers);
+        let (camera, estimate, buffers, direct) = (&self.camera, &self.estimate, &self.buffers, &self.direct);
         vec![
+            ("light_windows", Box::new(move |e: &mut wgpu::CommandEncoder| direct.record_pass(e, buffers))),
             (
                 "camera",
                 Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
@@ -368,9 +452,9 @@ impl<'a> Renderer<'a> {
     }
 
     /// Writes step `k`'s uniforms and submits the whole step in one command buffer.
-    pub fn submit_step(&self, k: u32) {
+    pub fn submit_step(&mut self, k: u32) {
         self.write_step(k);
-        self.submit(&self.step_stages(), "firstshot.render.step");
+        self.submit(&self.step_stages(k), "firstshot.render.step");
     }
 
     fn submit(&self, stages: &[Stage<'_>], label: &str) {
@@ -384,10 +468,10 @@ impl<'a> Renderer<'a> {
 
     /// Step `k` stage by stage, each submitted and timed on its own (`gpu::profile`); it
     /// leaves the same state as `submit_step`.
-    pub fn profile_step(&self, k: u32, timer: &StageTimer, before: Vec<Stage<'_>>) -> Result<Vec<StageTime>> {
+    pub fn profile_step(&mut self, k: u32, timer: &StageTimer, before: Vec<Stage<'_>>) -> Result<Vec<StageTime>> {
         self.write_step(k);
         let mut stages = before;
-        stages.extend(self.step_stages());
+        stages.extend(self.step_stages(k));
         timer.run(self.ctx, &stages)
     }
 
@@ -425,11 +509,11 @@ impl<'a> Renderer<'a> {
         let mut iteration_stats = IterationStats::default();
         let camera_samples = if self.options.iterations == 0 {
             self.direct_image();
-            DIRECT_CAMERA_SAMPLES_PER_AXIS * DIRECT_CAMERA_SAMPLES_PER_AXIS
+            self.options.direct_passes
         } else {
             iteration_stats = self.iterate(resume, hooks)?;
             hooks.phase("iteration", iteration_stats.ms);
-            iteration_stats.steps
+            iteration_stats.steps.saturating_sub(self.burn_in)
         };
         let image = self.read_image()?;
         let image_ms = milliseconds(image_start);
@@ -452,11 +536,14 @@ impl<'a> Renderer<'a> {
                 first_shot_pairs: fs.map_or(0, |f| f.pairs),
                 first_shot_faces: fs.map_or(0, |f| f.faces),
                 first_shot_ms: fs.map_or(0.0, |f| f.ms),
+                shadow_resolution: self.direct.resolution,
+                shadow_atlas_texels: self.direct.atlas_texels(),
                 bundle_resolution: o.bundle_resolution,
                 bundle_capacity: iteration_stats.capacity,
                 iteration_ms_median: iteration_stats.step_ms_median,
                 iteration_ms: iteration_stats.ms,
-                iterations: iteration_stats.steps,
+                iterations: iteration_stats.steps.saturating_sub(self.burn_in),
+                burn_in_steps: iteration_stats.steps.min(self.burn_in),
                 seed: o.seed,
                 tessellation_ms: 0.0,
                 upload_ms: self.upload_ms,
@@ -466,18 +553,34 @@ impl<'a> Renderer<'a> {
         })
     }
 
-    /// An image without iteration: emission and first shot, averaged over a stratified grid
-    /// of camera samples per pixel.
-    fn direct_image(&self) {
-        let per_axis = DIRECT_CAMERA_SAMPLES_PER_AXIS;
-        let mut rng = StepRng::new(self.options.seed, u64::MAX);
-        self.estimate.set_params(&self.ctx.queue, self.scene.environment, self.buffers.patch_count, false);
-        for k in 0..per_axis * per_axis {
+    /// An image without iteration: emission and direct light, averaged over
+    /// `direct_passes` passes, each with its own camera sample per pixel (stratified over a
+    /// grid of the largest square number of passes) and its own points on the area lights.
+    fn direct_image(&mut self) {
+        let passes = self.options.direct_passes.max(1);
+        let per_axis = (passes as f64).sqrt().floor().max(1.0) as u32;
+        let queue = &self.ctx.queue;
+        let (environment, patch_count) = (self.scene.environment, self.buffers.patch_count);
+        self.estimate.set_params(queue, environment, patch_count, self.direct.count(), false);
+        // Pass k takes light triangle k mod T; the camera cells go in a shuffled order, so
+        // that a pixel's sub-position is not tied to a part of the light.
+        let cells = per_axis * per_axis;
+        let mut order: Vec<u32> = (0..cells).collect();
+        let mut shuffle = StepRng::new(self.options.seed, u64::MAX - passes as u64);
+        for i in (1..order.len()).rev() {
+            let pick = ((shuffle.uniform() * (i + 1) as f64) as usize).min(i);
+            order.swap(i, pick);
+        }
+        for k in 0..passes {
+            // Generators of their own, apart from the steps' (seed, k) streams.
+            let mut rng = StepRng::new(self.options.seed, u64::MAX - k as u64);
+            let cell = order[(k % cells) as usize];
             let jitter = [
-                ((k % per_axis) as f64 + rng.uniform()) / per_axis as f64,
-                ((k / per_axis) as f64 + rng.uniform()) / per_axis as f64,
+                ((cell % per_axis) as f64 + rng.uniform()) / per_axis as f64,
+                ((cell / per_axis) as f64 + rng.uniform()) / per_axis as f64,
             ];
             self.write_camera([jitter[0] as f32, jitter[1] as f32]);
+            self.direct.prepare_pass(queue, k as u64);
             self.submit(&self.image_stages(), "firstshot.render.direct_image");
         }
     }
@@ -542,9 +645,12 @@ impl<'a> Renderer<'a> {
         };
         let mut batch_ms = Vec::new();
         let mut interrupted = false;
-        while step < options.iterations && !interrupted {
+        let total = options.iterations.saturating_add(self.burn_in);
+        while step < total && !interrupted {
+            // A time limit still lets one step into the image, so that there is one.
             if let Some(limit) = options.time_limit
                 && self.start.elapsed() >= limit
+                && step > self.burn_in
             {
                 break;
             }
@@ -552,7 +658,7 @@ impl<'a> Renderer<'a> {
             copy_all(true);
             self.clear_overflow();
             let mut batch = 0;
-            while batch < STEPS_PER_BATCH && step + batch < options.iterations {
+            while batch < STEPS_PER_BATCH && step + batch < total {
                 self.submit_step(step + batch);
                 batch += 1;
                 if hooks.stop_requested() {
@@ -568,20 +674,22 @@ impl<'a> Renderer<'a> {
                 copy_all(false);
                 let (capacity, resolution) = self.bundle_size();
                 let capacity = (capacity as u64).saturating_mul(2);
-                self.iteration = Some(Iteration::new(ctx, &self.buffers, resolution, capacity)?);
+                let iteration = Iteration::new(ctx, &self.buffers, resolution, capacity)?;
+                self.estimate.rebind_gather(device, &iteration.gather);
+                self.iteration = Some(iteration);
                 interrupted = false;
                 continue;
             }
             batch_ms.push(batch_start.elapsed().as_secs_f64() * 1e3 / batch as f64);
             step += batch;
-            hooks.progress(step, options.iterations);
-            if hooks.checkpoint_due() {
+            hooks.progress(step, total);
+            if step > self.burn_in && hooks.checkpoint_due() {
                 let (checkpoint, image) = self.checkpoint(step)?;
                 hooks.checkpoint(checkpoint, &image)?;
             }
         }
         ctx.wait()?;
-        if hooks.wants_final_checkpoint() && step > 0 {
+        if hooks.wants_final_checkpoint() && step > self.burn_in {
             let (checkpoint, image) = self.checkpoint(step)?;
             hooks.checkpoint(checkpoint, &image)?;
         }

@@ -13,8 +13,18 @@ use firstshot::scene::{Material, MaterialKind, Patches};
 use glam::DVec3;
 
 const RESOLUTION: u32 = 64;
-const STAGES: [&str; 9] =
-    ["clear", "reflect", "count", "prefix_sum", "fill", "transfer", "finalize", "camera", "estimate"];
+const STAGES: [&str; 10] = [
+    "clear",
+    "reflect",
+    "count",
+    "prefix_sum",
+    "fill",
+    "transfer",
+    "finalize",
+    "light_windows",
+    "camera",
+    "estimate",
+];
 
 /// A closed diffuse room with glowing walls, seen from inside: every step has work in
 /// every stage.
@@ -41,9 +51,11 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
         iterations: 3,
         seed: 7,
         bundle_resolution: RESOLUTION,
+        // Every step reaches the image, so every stage runs.
+        burn_in: Some(0),
         ..RenderOptions::from_scene(&scene)
     };
-    let renderer = Renderer::new(ctx, &scene, &patches, &options, &mut NoHooks).unwrap();
+    let mut renderer = Renderer::new(ctx, &scene, &patches, &options, &mut NoHooks).unwrap();
     let timer = StageTimer::new(ctx, 16);
     for k in 0..3 {
         if profiled {

@@ -54,7 +54,7 @@ fn reduce_face(@builtin(global_invocation_id) gid: vec3<u32>) {
     let len = length(v);
     // The face's normal is `forward` (unit) at focal distance 1, so cos(theta_p) = 1 / |v|.
     var weight = 1.0 / (len * len * len);
-    if (s.kind == LIGHT_AREA_VERTEX) {
+    if (s.kind == LIGHT_AREA) {
         weight *= max(dot(v / len, s.normal.xyz), 0.0);
     }
     let fixed = u32(min(weight, 1.0) * FIXED_POINT_SCALE + 0.5);

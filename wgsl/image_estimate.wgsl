@@ -1,18 +1,37 @@
-// Image estimate (DESIGN.md 2.5): for every camera pixel, the radiance that leaves the
-// point it sees toward the eye, added to the running sum of the image:
-//   E = Le_j + Lfs_j(x, w_e) + 2 pi J_j f_j(win_j, x, w_e)
-// with x the pixel's own surface point (the camera ray through this pass's sample hits the
-// plane of patch j there), the environment where no surface is, black on a back side.
+// Image estimate (DESIGN.md 6): for every camera pixel, one estimate of the radiance that
+// leaves the point x it sees toward the eye, added to the running sum of the image:
+//   E = Le_j(w_e) + D(x, w_e) + G(x, w_e)
+// D, the direct light of every first-shot light with its own visibility of x; G, the
+// indirect light gathered through this step's bundle along the one line through x. x is the
+// pixel's own surface point (the camera ray through this pass's sample hits patch j's plane
+// there); the environment where no surface is, black on a back side.
 //
-// Compute, workgroup 8 x 8, one invocation per pixel. Bindings (group 0):
-//   0 camera        uniform Camera            read
-//   1 params        uniform EstimateParams    read
-//   2 item_buffer   texture_2d<u32>           read (patch index + 1 per pixel)
-//   3 patches       array<Patch>              read
-//   4 materials     array<Material>           read
-//   5 state         array<PatchState>         read
-//   6 image_sum     array<vec4<f32>>          read_write (one pixel per invocation: no race)
-// Group 1: the first-shot table (wgsl/common/first_shot_table.wgsl).
+// Visibility V(y, x) of a light point y: the item buffer of y's window, in the direction of
+// x, gives the surfaces seen through the centres of the 2 x 2 texels around that direction;
+// the segment from y to x is tested exactly against each of those triangles. So shadow edges
+// are exact wherever an occluder covers one of those texel centres; an occluder that slips
+// between all four (thinner than a texel) is missed.
+//
+// The gather: x projected onto the bundle's grid gives its line; along it, in x's front
+// direction s d, the nearest surface m (by the exact distance along the ray from x to m's
+// plane, among the fragments of the line near x) sends O_m if its front faces x, black if
+// its back does; the environment if there is none.
+//
+// Compute, workgroup 8 x 8, one invocation per pixel. Bindings:
+//   group 0: 0 camera        uniform Camera              read
+//            1 params        uniform EstimateParams      read
+//            2 item_buffer   texture_2d<u32>             read (camera: patch index + 1)
+//            3 patches       array<Patch>                read
+//            4 materials     array<Material>             read
+//            5 image_sum     array<vec4<f32>>            read_write (one pixel per invocation)
+//   group 1: 0 lights        array<DirectLight>          read
+//            1 faces         array<WindowFace>           read
+//            2 kept_atlas    texture_2d<u32>             read (faces with tile.w == 0)
+//            3 pass_atlas    texture_2d<u32>             read (faces with tile.w == 1)
+//   group 2: 0 bundle        uniform Bundle              read
+//            1 offsets       array<u32>                  read (line starts)
+//            2 fragments     array<vec2<u32>>            read (each line sorted by depth)
+//            3 outgoing      array<vec4<f32>>            read (O_j of this step)
 // Host: src/stages/image_estimate.rs.
 
 @group(0) @binding(0) var<uniform> camera: Camera;
@@ -20,8 +39,243 @@
 @group(0) @binding(2) var item_buffer: texture_2d<u32>;
 @group(0) @binding(3) var<storage, read> patches: array<Patch>;
 @group(0) @binding(4) var<storage, read> materials: array<Material>;
-@group(0) @binding(5) var<storage, read> state: array<PatchState>;
-@group(0) @binding(6) var<storage, read_write> image_sum: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> image_sum: array<vec4<f32>>;
+@group(1) @binding(0) var<storage, read> lights: array<DirectLight>;
+@group(1) @binding(1) var<storage, read> faces: array<WindowFace>;
+@group(1) @binding(2) var kept_atlas: texture_2d<u32>;
+@group(1) @binding(3) var pass_atlas: texture_2d<u32>;
+@group(2) @binding(0) var<uniform> bundle: Bundle;
+@group(2) @binding(1) var<storage, read> offsets: array<u32>;
+@group(2) @binding(2) var<storage, read> fragments: array<vec2<u32>>;
+@group(2) @binding(3) var<storage, read> outgoing: array<vec4<f32>>;
+
+// The segment from y to x leaves out this share of its length at each end: its ends lie on
+// the light and on x's own surface.
+const SEGMENT_EPSILON: f32 = 1e-4;
+// Fragments of a line examined at most per gather (a bound on the work of one pixel).
+const GATHER_SCAN: u32 = 64u;
+
+// Whether the segment y + t (x - y), SEGMENT_EPSILON < t < 1 - SEGMENT_EPSILON, crosses
+// patch k (Moller-Trumbore, either side).
+fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
+    let a = patches[k].v0.xyz;
+    let e1 = patches[k].v1.xyz - a;
+    let e2 = patches[k].v2.xyz - a;
+    let dir = x - y;
+    let p = cross(dir, e2);
+    let det = dot(e1, p);
+    if (abs(det) < 1e-30) {
+        return false;
+    }
+    let inv = 1.0 / det;
+    let s = y - a;
+    let u = dot(s, p) * inv;
+    if (u < 0.0 || u > 1.0) {
+        return false;
+    }
+    let q = cross(s, e1);
+    let v = dot(dir, q) * inv;
+    if (v < 0.0 || u + v > 1.0) {
+        return false;
+    }
+    let t = dot(e2, q) * inv;
+    return t > SEGMENT_EPSILON && t < 1.0 - SEGMENT_EPSILON;
+}
+
+fn atlas_id(atlas: u32, at: vec2<i32>) -> u32 {
+    if (atlas == 0u) {
+        return textureLoad(kept_atlas, at, 0).x;
+    }
+    return textureLoad(pass_atlas, at, 0).x;
+}
+
+// Whether the surface `id` (patch index + 1) of a window texel lies on the segment from y to x,
+// x on patch j.
+fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
+    return id != NO_PATCH && id - 1u != j && id <= params.patch_count && segment_hits(id - 1u, y, x);
+}
+
+// The face of a window that holds direction w (from the light toward x): the one whose
+// forward axis has the largest component of w, for all three windows (the host builds them
+// in this order, `first_shot::faces`): a cube (+x, -x, +y, -y, +z, -z), a hemicube (n, t1,
+// -t1, t2, -t2; its top face's up is t1 and its right t2) and a cubic tetrahedron (three
+// orthonormal axes).
+fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
+    if (count == 6u) {
+        let a = abs(w);
+        if (a.x >= a.y && a.x >= a.z) {
+            return first + select(0u, 1u, w.x < 0.0);
+        }
+        if (a.y >= a.z) {
+            return first + 2u + select(0u, 1u, w.y < 0.0);
+        }
+        return first + 4u + select(0u, 1u, w.z < 0.0);
+    }
+    if (count == 5u) {
+        let c = dot(w, faces[first].view.forward.xyz);
+        let t1 = dot(w, faces[first].view.up.xyz);
+        let t2 = dot(w, faces[first].view.right.xyz);
+        if (c >= max(abs(t1), abs(t2))) {
+            return first;
+        }
+        if (abs(t1) >= abs(t2)) {
+            return first + select(1u, 2u, t1 < 0.0);
+        }
+        return first + select(3u, 4u, t2 < 0.0);
+    }
+    var best = first;
+    var largest = dot(w, faces[first].view.forward.xyz);
+    for (var f = first + 1u; f < first + count; f++) {
+        let z = dot(w, faces[f].view.forward.xyz);
+        if (z > largest) {
+            largest = z;
+            best = f;
+        }
+    }
+    return best;
+}
+
+// V(y, x) for the light whose window is faces[first..first + count], x on patch j: 1 unless a
+// surface of the window's item buffer around the direction of x lies on the segment between
+// them. Fields are read one by one: a CPU adapter loads every field of a whole-struct read.
+fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
+    let w = x - y;
+    let f = window_face(w, first, count);
+    let z = dot(w, faces[f].view.forward.xyz);
+    let right = faces[f].view.right;
+    let up = faces[f].view.up;
+    let window = vec2<f32>(dot(w, right.xyz), dot(w, up.xyz)) / z - faces[f].view.jitter.zw;
+    let ndc = clamp(window / vec2<f32>(right.w, up.w), vec2<f32>(-1.0), vec2<f32>(1.0));
+    let side = faces[f].view.size.x;
+    let tile = faces[f].tile;
+    let pixel = vec2<f32>(0.5 * (ndc.x + 1.0), 0.5 * (1.0 - ndc.y)) * f32(side);
+    if (z <= 0.0 || pixel.y >= f32(tile.z)) {
+        // Outside the window (below an area light's plane): nothing reaches x.
+        return false;
+    }
+    // The 2 x 2 texels whose centres surround the direction, clamped to the face; each
+    // distinct surface among them is tested once.
+    let last = vec2<i32>(i32(side) - 1, i32(tile.z) - 1);
+    let lo = clamp(vec2<i32>(floor(pixel - vec2<f32>(0.5))), vec2<i32>(0), last);
+    let hi = min(lo + vec2<i32>(1), last);
+    let origin = vec2<i32>(tile.xy);
+    let a = atlas_id(tile.w, origin + lo);
+    let b = atlas_id(tile.w, origin + vec2<i32>(hi.x, lo.y));
+    let c = atlas_id(tile.w, origin + vec2<i32>(lo.x, hi.y));
+    let d = atlas_id(tile.w, origin + hi);
+    if (blocks(a, j, y, x)) {
+        return false;
+    }
+    if (b != a && blocks(b, j, y, x)) {
+        return false;
+    }
+    if (c != a && c != b && blocks(c, j, y, x)) {
+        return false;
+    }
+    return d == a || d == b || d == c || !blocks(d, j, y, x);
+}
+
+// D(x, w_out): every light's direct radiance reflected at x on patch j toward w_out.
+fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
+    var sum = vec3<f32>(0.0);
+    for (var i = 0u; i < params.light_count; i++) {
+        let y = lights[i].position.xyz;
+        let to_light = y - x;
+        let r2 = dot(to_light, to_light);
+        let w_in = to_light * inverseSqrt(r2);
+        let cos_x = dot(n, w_in);
+        if (cos_x <= 0.0 || r2 <= 0.0) {
+            continue;
+        }
+        var g = cos_x / r2;
+        if (lights[i].kind == LIGHT_AREA) {
+            g *= max(0.0, dot(lights[i].normal.xyz, -w_in));
+        }
+        if (g > 0.0 && visible(y, lights[i].first_face, lights[i].faces, j, x)) {
+            sum += lights[i].strength.rgb * g * brdf(m, n, w_in, w_out);
+        }
+    }
+    return sum;
+}
+
+// The radiance arriving at x (on patch j, normal n) from direction `toward` (= s d) along
+// this step's bundle.
+fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
+    let rel = x - bundle.centre.xyz;
+    let clip = vec2<f32>(dot(rel, bundle.axis_u.xyz) + bundle.axis_u.w, dot(rel, bundle.axis_v.xyz) + bundle.axis_v.w);
+    let r = f32(bundle.resolution);
+    let cell = vec2<f32>(0.5 * (clip.x + 1.0), 0.5 * (1.0 - clip.y)) * r;
+    if (any(cell < vec2<f32>(0.0)) || any(cell >= vec2<f32>(r))) {
+        return bundle.environment.rgb;
+    }
+    let line = u32(cell.y) * bundle.resolution + u32(cell.x);
+    let begin = offsets[line];
+    let end = min(offsets[line + 1u], bundle.capacity);
+    let depth = dot(rel, bundle.direction.xyz);
+    // The line's fragments lie at depths taken at its centre, up to a pixel's half diagonal
+    // from x's ray: a surface within `slack` of x along the line may still be ahead of it.
+    let slack = 0.75 * sqrt(bundle.direction.w);
+    let start_depth = depth - s * slack;
+    // First fragment at or past start_depth in the direction of travel (binary search over
+    // the sorted line).
+    var lo = begin;
+    var hi = end;
+    while (lo < hi) {
+        let mid = (lo + hi) / 2u;
+        if (bitcast<f32>(fragments[mid].x) < start_depth) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    var best_t = 3.4e38;
+    var best = NO_PATCH;
+    let eps = 1e-5 / bundle.centre.w;
+    for (var step = 0u; step < GATHER_SCAN; step++) {
+        var k: u32;
+        if (s > 0.0) {
+            if (lo + step >= end) {
+                break;
+            }
+            k = lo + step;
+        } else {
+            if (lo < begin + step + 1u) {
+                break;
+            }
+            k = lo - step - 1u;
+        }
+        let along = s * (bitcast<f32>(fragments[k].x) - depth);
+        if (along - 2.0 * slack > best_t) {
+            break;
+        }
+        let m = fragments[k].y & ~FRAGMENT_FRONT_BIT;
+        if (m == j) {
+            continue;
+        }
+        let plane = patches[m].normal;
+        let denom = dot(plane.xyz, toward);
+        // Distance from x to m's plane: ~0 for j's twin and the patches beside j in its
+        // plane, which are not ahead of x whatever f32 rounding says.
+        let dist = plane.w - dot(plane.xyz, x);
+        if (abs(denom) < 1e-6 || abs(dist) <= eps) {
+            continue;
+        }
+        let t = dist / denom;
+        if (t > 0.0 && t < best_t) {
+            best_t = t;
+            best = m + 1u;
+        }
+    }
+    if (best == NO_PATCH) {
+        return bundle.environment.rgb;
+    }
+    let m = best - 1u;
+    // Its front must face x: against the direction of travel.
+    if (dot(patches[m].normal.xyz, toward) < 0.0) {
+        return outgoing[m].rgb;
+    }
+    return vec3<f32>(0.0);
+}
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -40,15 +294,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let dir = normalize(pixel_direction(camera, gid.xy));
         let w_out = -dir;
         radiance = vec3<f32>(0.0);
-        let facing = dot(n, w_out);
-        if (facing > 0.0) {
+        if (dot(n, w_out) > 0.0) {
             let t = (plane.w - dot(n, camera.eye.xyz)) / dot(n, dir);
             let x = camera.eye.xyz + t * dir;
             let m = materials[patches[j].material];
-            radiance = patches[j].emission.rgb + first_shot_radiance(j, x, n, m, w_out);
-            if (params.use_state != 0u) {
-                let s = state[j];
-                radiance += 2.0 * PI * s.incoming.rgb * brdf(m, n, -s.direction.xyz, w_out);
+            radiance = patches[j].emission.rgb + direct_light(j, x, n, m, w_out);
+            if (params.gather != 0u) {
+                let d = bundle.direction.xyz;
+                let s = bundle_side(n, d);
+                let toward = s * d;
+                // -s d has density 1 / (2 pi) on x's hemisphere.
+                let incoming = gathered(j, x, toward, s);
+                radiance += 2.0 * PI * incoming * abs(dot(n, d)) * brdf(m, n, toward, w_out);
             }
         }
     }

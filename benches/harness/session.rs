@@ -72,7 +72,7 @@ impl<'a> Session<'a> {
                     .ctx
                     .device
                     .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.bench.step") });
-                for (_, record) in self.renderer.step_stages() {
+                for (_, record) in self.renderer.step_stages(k) {
                     record(&mut encoder);
                 }
                 let command = encoder.finish();

@@ -13,12 +13,13 @@ const COMMON: &[(&str, &str)] = &[
 const FIRST_SHOT_TABLE: &str = include_str!("../../wgsl/common/first_shot_table.wgsl");
 
 /// Kernels that evaluate the first-shot radiance and so bind the table as group 1.
-const USES_FIRST_SHOT_TABLE: &[&str] = &["image_estimate", "bundle_reflect"];
+const USES_FIRST_SHOT_TABLE: &[&str] = &["bundle_reflect"];
 
 /// Every kernel of the pipeline, by stem (`wgsl/<stem>.wgsl`, `src/stages/<stem>.rs`).
 pub const KERNELS: &[(&str, &str)] = &[
     ("camera_item_buffer", include_str!("../../wgsl/camera_item_buffer.wgsl")),
     ("image_estimate", include_str!("../../wgsl/image_estimate.wgsl")),
+    ("light_window", include_str!("../../wgsl/light_window.wgsl")),
     ("brdf_probe", include_str!("../../wgsl/brdf_probe.wgsl")),
     ("bundle_reflect", include_str!("../../wgsl/bundle_reflect.wgsl")),
     ("bundle_visibility", include_str!("../../wgsl/bundle_visibility.wgsl")),

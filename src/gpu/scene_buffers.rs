@@ -110,7 +110,7 @@ pub fn gpu_samples(patches: &Patches) -> Vec<GpuLightSample> {
             strength: [s.strength[0], s.strength[1], s.strength[2], 0.0],
             kind: match s.kind {
                 SampleKind::Point => LIGHT_POINT,
-                SampleKind::AreaVertex { .. } => LIGHT_AREA_VERTEX,
+                SampleKind::AreaVertex { .. } => LIGHT_AREA,
             },
             _pad: [0; 3],
         })

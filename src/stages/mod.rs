@@ -10,4 +10,5 @@ pub mod camera_item_buffer;
 pub mod first_shot_reduce;
 pub mod first_shot_table;
 pub mod image_estimate;
+pub mod light_window;
 pub mod prefix_sum;

@@ -55,9 +55,26 @@ struct Camera {
 struct EstimateParams {
     environment: vec4<f32>,
     patch_count: u32,
-    use_state: u32,
+    light_count: u32,
+    gather: u32,         // 1: gather indirect light through the step's bundle
     _pad0: u32,
-    _pad1: u32,
+}
+
+// A light for the per-pixel direct light of one pass (Rust: GpuDirectLight).
+struct DirectLight {
+    position: vec4<f32>, // xyz point light, or this pass's point on the area light
+    normal: vec4<f32>,   // xyz n_L (zero for a point light)
+    strength: vec4<f32>, // rgb factor of V f cos / r^2 (cos_L too for an area light)
+    kind: u32,           // LIGHT_*
+    first_face: u32,     // its window's faces in the face table
+    faces: u32,
+    _pad0: u32,
+}
+
+// One face of a light's window in the shadow atlas (Rust: GpuWindowFace).
+struct WindowFace {
+    view: Camera,
+    tile: vec4<u32>,     // xy top-left texel in the atlas, z rows inside the window
 }
 
 // One face of a light sample's window (Rust: GpuFaceParams).

@@ -1,0 +1,312 @@
+//! Per-pixel direct light (DESIGN.md 6): the first-shot lights as the image estimate sees
+//! them, and the item buffers of their windows, which give each pixel its own visibility.
+//!
+//! A point light keeps its cube of six faces, rendered once. An area light gets a new point
+//! y on it every pass, and its window (hemicube or cubic tetrahedron, as `--light-window`) is
+//! rendered again there: pass k takes light triangle k mod T (of its T triangles, so every
+//! T passes visit each once) and a point in it, which stands for T times that triangle's
+//! area. The v-th visit of a triangle takes the v-th point of a low-discrepancy sequence (R2)
+//! shifted by a random offset of that triangle (Cranley-Patterson rotation), so each point is
+//! uniform in the triangle and the points of successive visits spread evenly over it. The
+//! mean over passes is then the integral over the light, and penumbrae converge instead of
+//! showing the hard shadows of a fixed grid.
+//!
+//! Memory stays bounded however many lights a scene has: all faces share two atlas textures
+//! (the point lights' kept faces, the area lights' per-pass faces) of at most
+//! `SHADOW_TEXEL_BUDGET` texels together; more lights get smaller faces.
+
+use crate::first_shot::{self, LightWindow};
+use crate::gpu::scene_buffers::SceneBuffers;
+use crate::gpu::{Context, buffers};
+use crate::layout::{GpuDirectLight, GpuWindowFace, LIGHT_AREA, LIGHT_POINT};
+use crate::rng::StepRng;
+use crate::scene::{Light, LightSample, PatchKind, Patches, Rgb, SampleKind, Scene};
+use crate::stages::light_window::WindowAtlas;
+use glam::DVec3;
+
+/// Texels of both atlases together at most (an id and a depth of 4 bytes each: 256 MiB).
+pub const SHADOW_TEXEL_BUDGET: u64 = 1 << 25;
+/// The smallest face side the budget may shrink faces to.
+pub const MIN_SHADOW_RESOLUTION: u32 = 8;
+
+/// Generator streams of the triangles' shifts: (seed, SHIFT_STREAM - light), apart from the
+/// steps' (seed, k) and the direct passes' (seed, u64::MAX - pass).
+const SHIFT_STREAM: u64 = u64::MAX / 2;
+
+/// The v-th point of the R2 sequence (Roberts 2018), shifted by `shift`, modulo 1.
+fn r2_point(v: u64, shift: [f64; 2]) -> [f64; 2] {
+    const A1: f64 = 0.754_877_666_246_692_7;
+    const A2: f64 = 0.569_840_290_998_053_3;
+    let v = v as f64;
+    [(shift[0] + v * A1).fract(), (shift[1] + v * A2).fract()]
+}
+
+/// Which atlas a face lives in (`WindowFace::tile.w`).
+const KEPT: u32 = 0;
+const PER_PASS: u32 = 1;
+
+enum Source {
+    Point {
+        power: Rgb,
+    },
+    Area {
+        radiance: Rgb,
+        normal: DVec3,
+        /// The light's triangles (its patches), their areas and the random shifts of their
+        /// low-discrepancy sequences.
+        triangles: Vec<([DVec3; 3], f64, [f64; 2])>,
+    },
+}
+
+struct Planned {
+    source: Source,
+    /// Its entries in the face table.
+    faces: std::ops::Range<usize>,
+}
+
+/// The direct-light table, the window faces and their atlases.
+pub struct DirectLights {
+    lights: Vec<Planned>,
+    table: Vec<GpuDirectLight>,
+    faces: Vec<GpuWindowFace>,
+    lights_buffer: wgpu::Buffer,
+    faces_buffer: wgpu::Buffer,
+    kept: WindowAtlas,
+    per_pass: WindowAtlas,
+    window: LightWindow,
+    /// Pixels along a full face edge, after the memory budget.
+    pub resolution: u32,
+    near: f64,
+}
+
+/// Places tiles of (side, rows) texels on shelves at most `width` wide; returns their
+/// top-left corners and the atlas size.
+fn pack(tiles: &[(u32, u32)], width: u32) -> (Vec<[u32; 2]>, [u32; 2]) {
+    let (mut x, mut y, mut shelf, mut used) = (0u32, 0u32, 0u32, 0u32);
+    let mut corners = Vec::with_capacity(tiles.len());
+    for &(side, rows) in tiles {
+        if x + side > width {
+            (x, y, shelf) = (0, y + shelf, 0);
+        }
+        corners.push([x, y]);
+        x += side;
+        used = used.max(x);
+        shelf = shelf.max(rows);
+    }
+    (corners, [used, y + shelf])
+}
+
+/// A uniform point of the triangle from two uniform numbers.
+fn point_in_triangle([a, b, c]: [DVec3; 3], u1: f64, u2: f64) -> DVec3 {
+    let r = u1.sqrt();
+    (1.0 - r) * a + r * (1.0 - u2) * b + r * u2 * c
+}
+
+fn window_sample(source: &Source, position: DVec3) -> LightSample {
+    let kind = match source {
+        Source::Point { .. } => SampleKind::Point,
+        Source::Area { normal, .. } => SampleKind::AreaVertex { normal: *normal },
+    };
+    LightSample { position, kind, strength: [0.0; 3], weight: 1.0, light: 0 }
+}
+
+impl DirectLights {
+    /// The lights of `scene` that are first shot (none without `first_shot`), their windows
+    /// at `resolution` pixels per face edge (less if the budget or the device needs it),
+    /// and the point lights' kept faces rendered.
+    pub fn new(
+        ctx: &Context,
+        scene: &Scene,
+        patches: &Patches,
+        buffers: &SceneBuffers,
+        first_shot: bool,
+        window: LightWindow,
+        resolution: u32,
+        seed: u64,
+    ) -> Self {
+        let mut sources = Vec::new();
+        for (l, light) in scene.lights.iter().enumerate().filter(|_| first_shot) {
+            match *light {
+                Light::Point { position, power } => sources.push((Source::Point { power }, position)),
+                Light::Area { vertices, radiance, .. } => {
+                    let own: Vec<_> =
+                        patches.patches.iter().filter(|p| p.kind == PatchKind::AreaLight { light: l as u32 }).collect();
+                    let Some(first) = own.first() else { continue };
+                    let normal = first.normal;
+                    let mut shifts = StepRng::new(seed, SHIFT_STREAM - l as u64);
+                    let triangles =
+                        own.iter().map(|p| (p.vertices, p.area, [shifts.uniform(), shifts.uniform()])).collect();
+                    let centre = vertices.iter().sum::<DVec3>() / 4.0;
+                    sources.push((Source::Area { radiance, normal, triangles }, centre));
+                }
+            }
+        }
+        let near = buffers.radius * 1e-6;
+        let max_side = ctx.limits().max_texture_dimension_2d;
+        // The face layout at a resolution: (source index, face, atlas) for every face.
+        let layout = |r: u32| -> Vec<(usize, first_shot::Face, u32)> {
+            sources
+                .iter()
+                .enumerate()
+                .flat_map(|(i, (source, position))| {
+                    let atlas = if matches!(source, Source::Point { .. }) { KEPT } else { PER_PASS };
+                    first_shot::faces(&window_sample(source, *position), window, r, near)
+                        .0
+                        .into_iter()
+                        .map(move |f| (i, f, atlas))
+                })
+                .collect()
+        };
+        let mut r = resolution.clamp(MIN_SHADOW_RESOLUTION, max_side);
+        let (faces, corners, sizes) = loop {
+            let faces = layout(r);
+            let tiles = |atlas: u32| -> Vec<(u32, u32)> {
+                faces.iter().filter(|f| f.2 == atlas).map(|f| (r, f.1.rows)).collect()
+            };
+            let (kept_corners, kept_size) = pack(&tiles(KEPT), max_side);
+            let (pass_corners, pass_size) = pack(&tiles(PER_PASS), max_side);
+            let texels = |s: [u32; 2]| s[0] as u64 * s[1] as u64;
+            let fits = kept_size[1] <= max_side
+                && pass_size[1] <= max_side
+                && texels(kept_size) + texels(pass_size) <= SHADOW_TEXEL_BUDGET;
+            if fits || r <= MIN_SHADOW_RESOLUTION {
+                break (faces, [kept_corners, pass_corners], [kept_size, pass_size]);
+            }
+            r = (r / 2).max(MIN_SHADOW_RESOLUTION);
+        };
+        let mut next = [0usize; 2];
+        let mut table_faces = Vec::with_capacity(faces.len());
+        for (_, face, atlas) in &faces {
+            let [x, y] = corners[*atlas as usize][next[*atlas as usize]];
+            next[*atlas as usize] += 1;
+            table_faces.push(GpuWindowFace { view: face.view.gpu([0.5, 0.5]), tile: [x, y, face.rows, *atlas] });
+        }
+        let mut lights = Vec::with_capacity(sources.len());
+        let mut table = Vec::with_capacity(sources.len());
+        for (i, (source, position)) in sources.into_iter().enumerate() {
+            let first = faces.iter().position(|f| f.0 == i).unwrap_or(0);
+            let count = faces.iter().filter(|f| f.0 == i).count();
+            // A point light's intensity; an area light's point and strength are set per pass.
+            let (kind, strength) = match &source {
+                Source::Point { power } => {
+                    let k = 1.0 / (4.0 * std::f32::consts::PI);
+                    (LIGHT_POINT, [power[0] * k, power[1] * k, power[2] * k, 0.0])
+                }
+                Source::Area { .. } => (LIGHT_AREA, [0.0; 4]),
+            };
+            let entry = GpuDirectLight {
+                position: [position.x as f32, position.y as f32, position.z as f32, 0.0],
+                normal: [0.0; 4],
+                strength,
+                kind,
+                first_face: first as u32,
+                faces: count as u32,
+                _pad: 0,
+            };
+            table.push(entry);
+            lights.push(Planned { source, faces: first..first + count });
+        }
+        let device = &ctx.device;
+        let usage = wgpu::BufferUsages::COPY_DST;
+        let lights_buffer = buffers::storage_init(device, "firstshot.direct_light.lights", &non_empty(&table), usage);
+        let faces_buffer =
+            buffers::storage_init(device, "firstshot.direct_light.faces", &non_empty(&table_faces), usage);
+        let kept = WindowAtlas::new(device, "kept", &faces_buffer, sizes[0]);
+        let per_pass = WindowAtlas::new(device, "per_pass", &faces_buffer, sizes[1]);
+        let out = DirectLights {
+            lights,
+            table,
+            faces: table_faces,
+            lights_buffer,
+            faces_buffer,
+            kept,
+            per_pass,
+            window,
+            resolution: r,
+            near,
+        };
+        let kept_faces = out.faces_in(KEPT);
+        if !kept_faces.is_empty() {
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("firstshot.direct_light.kept"),
+            });
+            out.kept.record(&mut encoder, &buffers.vertices, buffers.patch_count, &kept_faces);
+            ctx.queue.submit([encoder.finish()]);
+        }
+        out
+    }
+
+    fn faces_in(&self, atlas: u32) -> Vec<(u32, GpuWindowFace)> {
+        self.faces.iter().enumerate().filter(|(_, f)| f.tile[3] == atlas).map(|(i, f)| (i as u32, *f)).collect()
+    }
+
+    /// Entries of the light table.
+    pub fn count(&self) -> u32 {
+        self.table.len() as u32
+    }
+
+    /// Whether a pass must render windows of its own (the scene has first-shot area lights).
+    pub fn has_area_lights(&self) -> bool {
+        self.lights.iter().any(|l| matches!(l.source, Source::Area { .. }))
+    }
+
+    pub fn lights_buffer(&self) -> &wgpu::Buffer {
+        &self.lights_buffer
+    }
+
+    pub fn faces_buffer(&self) -> &wgpu::Buffer {
+        &self.faces_buffer
+    }
+
+    pub fn kept_atlas(&self) -> &wgpu::TextureView {
+        self.kept.ids_view()
+    }
+
+    pub fn pass_atlas(&self) -> &wgpu::TextureView {
+        self.per_pass.ids_view()
+    }
+
+    /// Texels of both atlases.
+    pub fn atlas_texels(&self) -> u64 {
+        [self.kept.size, self.per_pass.size].iter().map(|s| s[0] as u64 * s[1] as u64).sum()
+    }
+
+    /// Places pass `pass`'s point on every area light and writes the light and face tables
+    /// for it.
+    pub fn prepare_pass(&mut self, queue: &wgpu::Queue, pass: u64) {
+        if !self.has_area_lights() {
+            return;
+        }
+        for (planned, entry) in self.lights.iter().zip(self.table.iter_mut()) {
+            let Source::Area { radiance, normal, triangles } = &planned.source else { continue };
+            let count = triangles.len() as u64;
+            let (vertices, area, shift) = triangles[(pass % count.max(1)) as usize];
+            let [u1, u2] = r2_point(pass / count.max(1), shift);
+            let y = point_in_triangle(vertices, u1, u2);
+            let weight = (area * count as f64) as f32;
+            entry.position = [y.x as f32, y.y as f32, y.z as f32, 0.0];
+            entry.normal = [normal.x as f32, normal.y as f32, normal.z as f32, 0.0];
+            entry.strength = [radiance[0] * weight, radiance[1] * weight, radiance[2] * weight, 0.0];
+            let r = self.resolution;
+            let (faces, _) = first_shot::faces(&window_sample(&planned.source, y), self.window, r, self.near);
+            for (slot, face) in self.faces[planned.faces.clone()].iter_mut().zip(faces) {
+                slot.view = face.view.gpu([0.5, 0.5]);
+            }
+        }
+        queue.write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&self.table));
+        queue.write_buffer(&self.faces_buffer, 0, bytemuck::cast_slice(&self.faces));
+    }
+
+    /// Records the item buffers of this pass's area-light windows.
+    pub fn record_pass(&self, encoder: &mut wgpu::CommandEncoder, buffers: &SceneBuffers) {
+        let faces = self.faces_in(PER_PASS);
+        if !faces.is_empty() {
+            self.per_pass.record(encoder, &buffers.vertices, buffers.patch_count, &faces);
+        }
+    }
+}
+
+/// `items`, or one zeroed item: a storage binding cannot be empty.
+fn non_empty<T: bytemuck::Pod + bytemuck::Zeroable>(items: &[T]) -> Vec<T> {
+    if items.is_empty() { vec![T::zeroed()] } else { items.to_vec() }
+}

@@ -1,0 +1,133 @@
+//! Light windows (`wgsl/light_window.wgsl`): item buffers of the lights' window faces, each
+//! face a tile of one atlas texture, for the per-pixel direct light.
+
+use crate::gpu::kernel;
+use crate::layout::GpuWindowFace;
+use crate::stages::camera_item_buffer::{DEPTH_FORMAT, ID_FORMAT, raster_vertex_layout};
+
+/// Pipeline and targets of one atlas of window faces.
+pub struct WindowAtlas {
+    pipeline: wgpu::RenderPipeline,
+    bind_group: wgpu::BindGroup,
+    ids_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    pub size: [u32; 2],
+}
+
+impl WindowAtlas {
+    /// An atlas of `size` texels whose faces are entries of `faces` (array<WindowFace>).
+    pub fn new(device: &wgpu::Device, label: &str, faces: &wgpu::Buffer, size: [u32; 2]) -> Self {
+        let module = kernel::module(device, "light_window");
+        let layout = kernel::buffer_layout(
+            device,
+            "firstshot.light_window.layout",
+            wgpu::ShaderStages::VERTEX,
+            &[(false, true, std::mem::size_of::<GpuWindowFace>() as u64)],
+        );
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("firstshot.light_window.pipeline_layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("firstshot.light_window.pipeline"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(raster_vertex_layout())],
+            },
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: ID_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let bind_group = kernel::buffer_bind_group(device, "firstshot.light_window.bind_group", &layout, &[faces]);
+        let texture = |format, usage, what: &str| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(&format!("firstshot.light_window.{label}.{what}")),
+                size: wgpu::Extent3d { width: size[0].max(1), height: size[1].max(1), depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let ids = texture(ID_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING, "ids");
+        let depth = texture(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT, "depth");
+        WindowAtlas {
+            pipeline,
+            bind_group,
+            ids_view: ids.create_view(&Default::default()),
+            depth_view: depth.create_view(&Default::default()),
+            size,
+        }
+    }
+
+    /// The atlas of patch ids, for the estimate to read.
+    pub fn ids_view(&self) -> &wgpu::TextureView {
+        &self.ids_view
+    }
+
+    /// Records one pass that clears the whole atlas and renders every patch into each of
+    /// `faces` (index into the face table, and the face): one draw per face, the viewport on
+    /// its tile, the scissor on its rows.
+    pub fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        vertices: &wgpu::Buffer,
+        patch_count: u32,
+        faces: &[(u32, GpuWindowFace)],
+    ) {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("firstshot.light_window.pass"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.ids_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth_view,
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_vertex_buffer(0, vertices.slice(..));
+        for (index, face) in faces {
+            let [x, y, rows, _] = face.tile;
+            let side = face.view.size[0];
+            pass.set_viewport(x as f32, y as f32, side as f32, side as f32, 0.0, 1.0);
+            pass.set_scissor_rect(x, y, side, rows.clamp(1, side));
+            pass.draw(0..patch_count * 3, *index..*index + 1);
+        }
+    }
+}

@@ -1,0 +1,46 @@
+// Light windows (DESIGN.md 6): the item buffers of the lights' windows for the per-pixel
+// direct light, every face a tile of one atlas texture. Each draw renders every patch into
+// one face: the instance index picks the face's view, the host sets the viewport to its tile
+// and the scissor to the rows inside the window.
+//
+// Render pass. Vertex input: RasterVertex (location 0 position, location 1 patch id with
+// VERTEX_TWIN_BIT). Bindings: group 0 binding 0 `faces` (array<WindowFace>, read, vertex).
+// Target: R32Uint patch index + 1 (NO_PATCH where nothing), Depth32Float reversed-z (greater
+// is nearer, cleared to 0). No culling: a surface seen from its back still occludes.
+// Invariant: a face's pixel (i, j) holds the surface seen through its centre, as for the
+// camera (`camera_item_buffer.wgsl`), so `image_estimate` can find the texels around any
+// direction. Host: src/stages/light_window.rs.
+
+@group(0) @binding(0) var<storage, read> faces: array<WindowFace>;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) @interpolate(flat) patch_id: u32,
+}
+
+@vertex
+fn vs_main(
+    @location(0) position: vec3<f32>,
+    @location(1) patch_id: u32,
+    @builtin(instance_index) face: u32,
+) -> VertexOut {
+    let view = faces[face].view;
+    let rel = position - view.eye.xyz;
+    let x = dot(rel, view.right.xyz);
+    let y = dot(rel, view.up.xyz);
+    let z = dot(rel, view.forward.xyz);
+    var out: VertexOut;
+    let window = vec2<f32>(x, y) - view.jitter.zw * z;
+    out.clip = vec4<f32>(window.x / view.right.w, window.y / view.up.w, view.forward.w, z);
+    out.patch_id = patch_id;
+    return out;
+}
+
+@fragment
+fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) u32 {
+    // Of two back-to-back twins at the same depth only the one facing the light counts.
+    if (!front && (in.patch_id & VERTEX_TWIN_BIT) != 0u) {
+        discard;
+    }
+    return (in.patch_id & ~VERTEX_TWIN_BIT) + 1u;
+}
