@@ -52,8 +52,6 @@
 // The segment from y to x leaves out this share of its length at each end: its ends lie on
 // the light and on x's own surface.
 const SEGMENT_EPSILON: f32 = 1e-4;
-// Fragments of a line examined at most per gather (a bound on the work of one pixel).
-const GATHER_SCAN: u32 = 64u;
 
 // Whether the segment y + t (x - y), SEGMENT_EPSILON < t < 1 - SEGMENT_EPSILON, crosses
 // patch k (Moller-Trumbore, either side).
@@ -198,6 +196,33 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
     return sum;
 }
 
+struct Candidate {
+    t: f32,
+    patch_id: u32,
+}
+
+// `best`, or fragment k of the line [begin, end) if its surface lies nearer ahead of x along
+// the ray x + t toward. Wrapped indices (below begin) are out of range.
+fn nearer(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, toward: vec3<f32>, eps: f32) -> Candidate {
+    if (k < range.x || k >= range.y) {
+        return best;
+    }
+    let m = fragments[k].y & ~FRAGMENT_FRONT_BIT;
+    let plane = patches[m].normal;
+    let denom = dot(plane.xyz, toward);
+    // Distance from x to m's plane: ~0 for j's twin and the patches beside j in its plane,
+    // which are not ahead of x whatever f32 rounding says.
+    let dist = plane.w - dot(plane.xyz, x);
+    if (m == j || abs(denom) < 1e-6 || abs(dist) <= eps) {
+        return best;
+    }
+    let t = dist / denom;
+    if (t > 0.0 && t < best.t) {
+        return Candidate(t, m + 1u);
+    }
+    return best;
+}
+
 // The radiance arriving at x (on patch j, normal n) from direction `toward` (= s d) along
 // this step's bundle.
 fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
@@ -228,48 +253,27 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
             hi = mid;
         }
     }
-    var best_t = 3.4e38;
-    var best = NO_PATCH;
+    // The nearest of the next four fragments in the direction of travel, by
+    // the exact distance from x along the ray to each one's plane. Unrolled: a CPU adapter
+    // runs a data-dependent loop over storage many times slower.
+    var best = Candidate(3.4e38, NO_PATCH);
+    let range = vec2<u32>(begin, end);
     let eps = 1e-5 / bundle.centre.w;
-    for (var step = 0u; step < GATHER_SCAN; step++) {
-        var k: u32;
-        if (s > 0.0) {
-            if (lo + step >= end) {
-                break;
-            }
-            k = lo + step;
-        } else {
-            if (lo < begin + step + 1u) {
-                break;
-            }
-            k = lo - step - 1u;
-        }
-        let along = s * (bitcast<f32>(fragments[k].x) - depth);
-        if (along - 2.0 * slack > best_t) {
-            break;
-        }
-        let m = fragments[k].y & ~FRAGMENT_FRONT_BIT;
-        if (m == j) {
-            continue;
-        }
-        let plane = patches[m].normal;
-        let denom = dot(plane.xyz, toward);
-        // Distance from x to m's plane: ~0 for j's twin and the patches beside j in its
-        // plane, which are not ahead of x whatever f32 rounding says.
-        let dist = plane.w - dot(plane.xyz, x);
-        if (abs(denom) < 1e-6 || abs(dist) <= eps) {
-            continue;
-        }
-        let t = dist / denom;
-        if (t > 0.0 && t < best_t) {
-            best_t = t;
-            best = m + 1u;
-        }
+    if (s > 0.0) {
+        best = nearer(best, lo, range, j, x, toward, eps);
+        best = nearer(best, lo + 1u, range, j, x, toward, eps);
+        best = nearer(best, lo + 2u, range, j, x, toward, eps);
+        best = nearer(best, lo + 3u, range, j, x, toward, eps);
+    } else {
+        best = nearer(best, lo - 1u, range, j, x, toward, eps);
+        best = nearer(best, lo - 2u, range, j, x, toward, eps);
+        best = nearer(best, lo - 3u, range, j, x, toward, eps);
+        best = nearer(best, lo - 4u, range, j, x, toward, eps);
     }
-    if (best == NO_PATCH) {
+    if (best.patch_id == NO_PATCH) {
         return bundle.environment.rgb;
     }
-    let m = best - 1u;
+    let m = best.patch_id - 1u;
     // Its front must face x: against the direction of travel.
     if (dot(patches[m].normal.xyz, toward) < 0.0) {
         return outgoing[m].rgb;
