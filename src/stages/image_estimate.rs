@@ -1,13 +1,33 @@
 //! Image estimate (`wgsl/image_estimate.wgsl`): adds one estimate of every camera pixel to
 //! the running sum of the image.
 
-use crate::gpu::scene_buffers::{FirstShotTable, SceneBuffers};
+use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uint_texture, uniform};
+use crate::gpu::scene_buffers::{FIRST_SHOT_TABLE_GROUP, SceneBuffers};
 use crate::gpu::{buffers, kernel};
 use crate::layout::{GpuCamera, GpuEstimateParams, GpuMaterial, GpuPatch, GpuPatchState};
 use crate::stages::camera_item_buffer::CameraItemBuffer;
 use crate::{Error, Result};
 
-const WORKGROUP: u32 = 8;
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "image_estimate",
+    visibility: wgpu::ShaderStages::COMPUTE,
+    // One invocation per pixel.
+    entry_points: &[compute("main", [8, 8, 1])],
+    groups: &[
+        &[
+            uniform::<GpuCamera>("camera"),
+            uniform::<GpuEstimateParams>("params"),
+            // Patch index + 1 per pixel.
+            uint_texture("item_buffer"),
+            read::<GpuPatch>("patches"),
+            read::<GpuMaterial>("materials"),
+            read::<GpuPatchState>("state"),
+            // One pixel per invocation: no race.
+            read_write::<[f32; 4]>("image_sum"),
+        ],
+        FIRST_SHOT_TABLE_GROUP,
+    ],
+};
 
 /// Pipeline, parameters and the image sum (vec4<f32> per pixel: rgb sum, w count).
 pub struct ImageEstimate {
@@ -22,23 +42,8 @@ pub struct ImageEstimate {
 
 impl ImageEstimate {
     pub fn new(device: &wgpu::Device, scene: &SceneBuffers, camera: &CameraItemBuffer) -> Self {
-        use buffers::storage_entry as storage;
-        let module = kernel::module(device, "image_estimate");
-        let compute = wgpu::ShaderStages::COMPUTE;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("firstshot.image_estimate.layout"),
-            entries: &[
-                buffers::uniform_entry::<GpuCamera>(0, compute),
-                buffers::uniform_entry::<GpuEstimateParams>(1, compute),
-                kernel::uint_texture_entry(2),
-                storage(3, true, std::mem::size_of::<GpuPatch>() as u64),
-                storage(4, true, std::mem::size_of::<GpuMaterial>() as u64),
-                storage(5, true, std::mem::size_of::<GpuPatchState>() as u64),
-                storage(6, false, 16),
-            ],
-        });
-        let table_layout = FirstShotTable::layout(device);
-        let pipeline = kernel::compute_pipeline(device, &module, "image_estimate", "main", &[&layout, &table_layout]);
+        let built = SPEC.build(device);
+        let pipeline = built.compute_pipeline(device, "main");
         let params = buffers::uniform(
             device,
             "firstshot.image_estimate.params",
@@ -51,20 +56,20 @@ impl ImageEstimate {
             pixels * 16,
             wgpu::BufferUsages::COPY_SRC,
         );
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("firstshot.image_estimate.bind_group"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: camera.camera.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&camera.ids_view) },
-                wgpu::BindGroupEntry { binding: 3, resource: scene.patches.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: scene.materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: scene.state.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 6, resource: image_sum.as_entire_binding() },
+        let bind_group = built.bind_group(
+            device,
+            0,
+            &[
+                ("camera", (&camera.camera).into()),
+                ("params", (&params).into()),
+                ("item_buffer", (&camera.ids_view).into()),
+                ("patches", (&scene.patches).into()),
+                ("materials", (&scene.materials).into()),
+                ("state", (&scene.state).into()),
+                ("image_sum", (&image_sum).into()),
             ],
-        });
-        let table_group = scene.first_shot.bind_group(device, &table_layout, &scene.samples);
+        );
+        let table_group = scene.first_shot.bind_group(device, &built.layouts[1], &scene.samples);
         ImageEstimate {
             pipeline,
             bind_group,
@@ -78,7 +83,7 @@ impl ImageEstimate {
 
     /// Records one estimate of every pixel (reads the camera item buffer of this pass).
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let groups = (self.width.div_ceil(WORKGROUP), self.height.div_ceil(WORKGROUP));
+        let groups = SPEC.grid("main", [self.width, self.height]);
         let bind_groups = [&self.bind_group, &self.table_group];
         kernel::dispatch(encoder, "firstshot.image_estimate.pass", &self.pipeline, &bind_groups, groups);
     }
