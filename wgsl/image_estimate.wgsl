@@ -4,16 +4,10 @@
 // with x the pixel's own surface point (the camera ray through this pass's sample hits the
 // plane of patch j there), the environment where no surface is, black on a back side.
 //
-// Compute, workgroup 8 x 8, one invocation per pixel. Bindings (group 0):
-//   0 camera        uniform Camera            read
-//   1 params        uniform EstimateParams    read
-//   2 item_buffer   texture_2d<u32>           read (patch index + 1 per pixel)
-//   3 patches       array<Patch>              read
-//   4 materials     array<Material>           read
-//   5 state         array<PatchState>         read
-//   6 image_sum     array<vec4<f32>>          read_write (one pixel per invocation: no race)
+// Compute, one invocation per pixel: the only writer of its image_sum.
 // Group 1: the first-shot table (wgsl/common/first_shot_table.wgsl).
-// Host: src/stages/image_estimate.rs.
+// Host: src/stages/image_estimate.rs. Its `SPEC` is the one statement of the bindings (names,
+// kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> camera: Camera;
 @group(0) @binding(1) var<uniform> params: EstimateParams;
