@@ -1,6 +1,7 @@
 //! WGSL sources: every kernel is one file in `wgsl/`, compiled with the generated constant
 //! header and the shared files of `wgsl/common/` in front of it.
 
+use crate::gpu::scene_buffers::FIRST_SHOT_TABLE_GROUP;
 use crate::layout;
 
 /// Shared WGSL, prepended to every kernel in this order.
@@ -12,8 +13,11 @@ const COMMON: &[(&str, &str)] = &[
 /// Shared WGSL that declares bindings (group 1), prepended only to the kernels that use it.
 const FIRST_SHOT_TABLE: &str = include_str!("../../wgsl/common/first_shot_table.wgsl");
 
-/// Kernels that evaluate the first-shot radiance and so bind the table as group 1.
-const USES_FIRST_SHOT_TABLE: &[&str] = &["image_estimate", "bundle_reflect"];
+/// Whether kernel `stem` binds the first-shot table (its spec's group 1), so needs the
+/// shared WGSL that declares it.
+fn uses_first_shot_table(stem: &str) -> bool {
+    crate::stages::SPECS.iter().any(|s| s.stem == stem && s.groups.contains(&FIRST_SHOT_TABLE_GROUP))
+}
 
 /// Every kernel of the pipeline, by stem (`wgsl/<stem>.wgsl`, `src/stages/<stem>.rs`).
 pub const KERNELS: &[(&str, &str)] = &[
@@ -42,7 +46,7 @@ pub fn source(stem: &str) -> String {
         out.push_str(&format!("\n// ---- {name}\n"));
         out.push_str(src);
     }
-    if USES_FIRST_SHOT_TABLE.contains(&stem) {
+    if uses_first_shot_table(stem) {
         out.push_str("\n// ---- common/first_shot_table.wgsl\n");
         out.push_str(FIRST_SHOT_TABLE);
     }
