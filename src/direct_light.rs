@@ -227,9 +227,8 @@ impl DirectLights {
         };
         let kept_faces = out.faces_in(KEPT);
         if !kept_faces.is_empty() {
-            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("firstshot.direct_light.kept"),
-            });
+            let mut encoder = device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.direct_light.kept") });
             out.kept.record(&mut encoder, &buffers.vertices, buffers.patch_count, &kept_faces);
             ctx.queue.submit([encoder.finish()]);
         }

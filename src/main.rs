@@ -290,28 +290,33 @@ fn output_paths(args: &RenderArgs, scene_path: &Path) -> Result<(PathBuf, PathBu
     Ok((exr, png))
 }
 
-fn run(args: RenderArgs) -> Result<(), Failure> {
-    if args.list_adapters {
-        let adapters = list_adapters();
-        if adapters.is_empty() {
-            println!("no adapters found");
-        }
-        for a in adapters {
-            println!("{}\t{}\t{}\t{}", a.name, a.backend, a.device_type, a.driver);
-        }
-        return Ok(());
+fn print_adapters() {
+    let adapters = list_adapters();
+    if adapters.is_empty() {
+        println!("no adapters found");
     }
-    let Some(scene_path) = args.scene.clone() else {
-        return Err(usage("a scene file is required".into()));
-    };
-    let say = |s: String| {
-        if !args.quiet {
+    for a in adapters {
+        println!("{}\t{}\t{}\t{}", a.name, a.backend, a.device_type, a.driver);
+    }
+}
+
+/// Progress messages on stderr, none with --quiet.
+#[derive(Clone, Copy)]
+struct Say {
+    quiet: bool,
+}
+
+impl Say {
+    fn say(self, s: String) {
+        if !self.quiet {
             eprintln!("{s}");
         }
-    };
-    let start = Instant::now();
-    let scene = scene::load(&scene_path)?;
-    let mut options = RenderOptions::from_scene(&scene);
+    }
+}
+
+/// The scene's render options with the flags applied, each flag checked for its range.
+fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptions, Failure> {
+    let mut options = RenderOptions::from_scene(scene);
     if let Some(v) = args.iterations {
         options.iterations = v;
     }
@@ -362,24 +367,22 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         options.direct_passes = v;
     }
     options.burn_in = args.burn_in.or(options.burn_in);
-    let (exr_path, png_path) = output_paths(&args, &scene_path)?;
-    firstshot::render::check_options(&scene, &options)?;
-    say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
+    Ok(options)
+}
 
-    let t = Instant::now();
-    let patches = scene::tessellate(&scene, options.patch_size)?;
-    let tessellation_ms = t.elapsed().as_secs_f64() * 1e3;
-    say(format!(
-        "tessellated into {} patches and {} light samples in {tessellation_ms:.0} ms",
-        patches.patches.len(),
-        patches.samples.len()
-    ));
-
-    if let Some(dir) = exr_path.parent().filter(|d| !d.as_os_str().is_empty()) {
+/// Makes the output's directory and checks that it takes a file, then reads the checkpoint
+/// to resume from (with --resume), which must belong to this scene and these flags.
+fn prepare_outputs(
+    args: &RenderArgs,
+    paths: &OutputPaths,
+    scene: &scene::Scene,
+    options: &RenderOptions,
+) -> Result<Option<Checkpoint>, Failure> {
+    if let Some(dir) = paths.exr.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| io_failure(dir, e))?;
     }
-    check_writable(&exr_path)?;
-    let checkpoint_path = exr_path.with_extension("checkpoint");
+    check_writable(&paths.exr)?;
+    let checkpoint_path = &paths.checkpoint;
     let resume = if args.resume {
         if !checkpoint_path.exists() {
             return Err(usage(format!(
@@ -387,12 +390,12 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
                 checkpoint_path.display()
             )));
         }
-        Some(Checkpoint::read(&checkpoint_path)?)
+        Some(Checkpoint::read(checkpoint_path)?)
     } else {
         None
     };
     if let Some(c) = &resume
-        && c.fingerprint != firstshot::render::fingerprint(&scene, &options)
+        && c.fingerprint != firstshot::render::fingerprint(scene, options)
     {
         return Err(usage(format!(
             "--resume: {} belongs to another scene or other flags (patch size, resolutions, seed, image size, first shot); run with the same ones or without --resume",
@@ -404,92 +407,171 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     {
         return Err(usage(format!("--checkpoint-every {s}: expected a number of seconds > 0")));
     }
+    Ok(resume)
+}
 
-    let ctx = Context::new(&args.adapter)?;
-    say(format!("adapter: {}", ctx.summary));
-    firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
-
+/// The first Ctrl-C sets the flag (the step finishes and everything is written); a second
+/// one quits at once.
+fn install_ctrl_c() -> Arc<AtomicBool> {
     let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // The first Ctrl-C finishes the step and writes everything; a second one quits now.
-        let _ = ctrlc::set_handler(move || {
-            if stop.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-        });
+    let flag = stop.clone();
+    let _ = ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+    });
+    stop
+}
+
+/// Where a render writes: PATH.exr, PATH.png and PATH.checkpoint.
+struct OutputPaths {
+    exr: PathBuf,
+    png: PathBuf,
+    checkpoint: PathBuf,
+}
+
+/// Everything a render needs once the flags, the scene and the adapter have been checked.
+struct Job<'a> {
+    args: &'a RenderArgs,
+    scene_path: &'a Path,
+    scene: &'a scene::Scene,
+    patches: &'a scene::Patches,
+    options: &'a RenderOptions,
+    ctx: &'a Context,
+    paths: &'a OutputPaths,
+    say: Say,
+    start: Instant,
+    tessellation_ms: f64,
+}
+
+fn run(args: RenderArgs) -> Result<(), Failure> {
+    if args.list_adapters {
+        print_adapters();
+        return Ok(());
     }
-    let attributes = |steps: u32| {
-        [
-            ("firstshot.scene", scene_path.display().to_string()),
-            ("firstshot.seed", options.seed.to_string()),
-            ("firstshot.iterations", steps.to_string()),
-            ("firstshot.adapter", ctx.summary.to_string()),
-        ]
+    let Some(scene_path) = args.scene.clone() else {
+        return Err(usage("a scene file is required".into()));
     };
-    let mut hooks = CliHooks {
-        quiet: args.quiet,
-        bar: None,
-        last_line: Instant::now(),
-        iteration_start: Instant::now(),
-        start_step: resume.as_ref().map_or(0, |c| c.step),
-        stop: stop.clone(),
-        checkpoint_every: args.checkpoint_every.map(std::time::Duration::from_secs_f64),
-        last_checkpoint: Instant::now(),
-        checkpoint_path: checkpoint_path.clone(),
-        exr_path: exr_path.clone(),
-        png_path: png_path.clone(),
-        attributes: &attributes,
-    };
-    let result = render_with(&ctx, &scene, &patches, &options, resume.as_ref(), &mut hooks);
-    if let Some(bar) = hooks.bar.take() {
-        bar.finish_and_clear();
-    }
-    let mut rendered = result?;
-    if rendered.stats.first_shot {
-        say(format!(
-            "first shot: {} light samples, {} faces of {r}x{r}, {} pairs, {:.0} ms",
-            rendered.stats.light_samples,
-            rendered.stats.first_shot_faces,
-            rendered.stats.first_shot_pairs,
-            rendered.stats.first_shot_ms,
-            r = options.hemicube_resolution
-        ));
-    }
-    rendered.stats.tessellation_ms = tessellation_ms;
-    rendered.stats.total_ms = start.elapsed().as_secs_f64() * 1e3;
+    let say = Say { quiet: args.quiet };
+    let start = Instant::now();
+    let scene = scene::load(&scene_path)?;
+    let options = render_options(&args, &scene)?;
+    let (exr, png) = output_paths(&args, &scene_path)?;
+    let paths = OutputPaths { checkpoint: exr.with_extension("checkpoint"), exr, png };
+    firstshot::render::check_options(&scene, &options)?;
+    say.say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
 
     let t = Instant::now();
-    let steps = if options.iterations == 0 { 0 } else { rendered.stats.iterations };
-    rendered.image.write_exr(&exr_path, &attributes(steps))?;
-    rendered.image.write_png(&png_path, rendered.image.auto_exposure())?;
-    if let Some(stats) = &args.stats {
-        let json = serde_json::to_string_pretty(&rendered.stats).context("encoding the stats")?;
-        firstshot::image::write_atomically(stats, json.as_bytes())?;
-    }
-    if rendered.stats.iterations > 0 && options.iterations > 0 {
-        say(format!(
-            "iteration: {} steps of {r}x{r} bundles, median {:.1} ms per step ({:.1} steps/s)",
-            rendered.stats.iterations,
-            rendered.stats.iteration_ms_median,
-            1e3 / rendered.stats.iteration_ms_median.max(1e-9),
-            r = options.bundle_resolution
-        ));
-    }
-    say(format!(
-        "wrote {} and {} in {:.0} ms ({:.0} ms in all)",
-        exr_path.display(),
-        png_path.display(),
-        t.elapsed().as_secs_f64() * 1e3,
-        start.elapsed().as_secs_f64() * 1e3
+    let patches = scene::tessellate(&scene, options.patch_size)?;
+    let tessellation_ms = t.elapsed().as_secs_f64() * 1e3;
+    say.say(format!(
+        "tessellated into {} patches and {} light samples in {tessellation_ms:.0} ms",
+        patches.patches.len(),
+        patches.samples.len()
     ));
-    if rendered.interrupted {
-        say(format!(
-            "interrupted after step {}: continue with the same flags and --resume ({})",
-            rendered.stats.iterations,
-            checkpoint_path.display()
-        ));
-        return Err(Failure { status: 130, error: anyhow::anyhow!("interrupted") });
+    let resume = prepare_outputs(&args, &paths, &scene, &options)?;
+
+    let ctx = Context::new(&args.adapter)?;
+    say.say(format!("adapter: {}", ctx.summary));
+    let job = Job {
+        args: &args,
+        scene_path: &scene_path,
+        scene: &scene,
+        patches: &patches,
+        options: &options,
+        ctx: &ctx,
+        paths: &paths,
+        say,
+        start,
+        tessellation_ms,
+    };
+    job.render(resume)
+}
+
+impl Job<'_> {
+    /// The EXR metadata of an image after `steps` steps.
+    fn attributes(&self, steps: u32) -> [(&'static str, String); 4] {
+        [
+            ("firstshot.scene", self.scene_path.display().to_string()),
+            ("firstshot.seed", self.options.seed.to_string()),
+            ("firstshot.iterations", steps.to_string()),
+            ("firstshot.adapter", self.ctx.summary.to_string()),
+        ]
     }
-    Ok(())
+
+    /// Renders with progress, Ctrl-C and checkpoints, then writes and reports.
+    fn render(&self, resume: Option<Checkpoint>) -> Result<(), Failure> {
+        let stop = install_ctrl_c();
+        let attributes = |steps: u32| self.attributes(steps);
+        let mut hooks = CliHooks {
+            quiet: self.args.quiet,
+            bar: None,
+            last_line: Instant::now(),
+            iteration_start: Instant::now(),
+            start_step: resume.as_ref().map_or(0, |c| c.step),
+            stop,
+            checkpoint_every: self.args.checkpoint_every.map(std::time::Duration::from_secs_f64),
+            last_checkpoint: Instant::now(),
+            checkpoint_path: self.paths.checkpoint.clone(),
+            exr_path: self.paths.exr.clone(),
+            png_path: self.paths.png.clone(),
+            attributes: &attributes,
+        };
+        let result = render_with(self.ctx, self.scene, self.patches, self.options, resume.as_ref(), &mut hooks);
+        if let Some(bar) = hooks.bar.take() {
+            bar.finish_and_clear();
+        }
+        let mut rendered = result?;
+        if rendered.stats.first_shot {
+            self.say.say(format!(
+                "first shot: {} light samples, {} faces of {r}x{r}, {} pairs, {:.0} ms",
+                rendered.stats.light_samples,
+                rendered.stats.first_shot_faces,
+                rendered.stats.first_shot_pairs,
+                rendered.stats.first_shot_ms,
+                r = self.options.hemicube_resolution
+            ));
+        }
+        rendered.stats.tessellation_ms = self.tessellation_ms;
+        rendered.stats.total_ms = self.start.elapsed().as_secs_f64() * 1e3;
+        self.write(&rendered)
+    }
+
+    /// Writes the image, PNG and stats, and reports; an interrupted run exits with 130.
+    fn write(&self, rendered: &firstshot::render::Rendered) -> Result<(), Failure> {
+        let (options, stats, paths) = (self.options, &rendered.stats, self.paths);
+        let t = Instant::now();
+        let steps = if options.iterations == 0 { 0 } else { stats.iterations };
+        rendered.image.write_exr(&paths.exr, &self.attributes(steps))?;
+        rendered.image.write_png(&paths.png, rendered.image.auto_exposure())?;
+        if let Some(path) = &self.args.stats {
+            let json = serde_json::to_string_pretty(stats).context("encoding the stats")?;
+            firstshot::image::write_atomically(path, json.as_bytes())?;
+        }
+        if stats.iterations > 0 && options.iterations > 0 {
+            self.say.say(format!(
+                "iteration: {} steps of {r}x{r} bundles, median {:.1} ms per step ({:.1} steps/s)",
+                stats.iterations,
+                stats.iteration_ms_median,
+                1e3 / stats.iteration_ms_median.max(1e-9),
+                r = options.bundle_resolution
+            ));
+        }
+        self.say.say(format!(
+            "wrote {} and {} in {:.0} ms ({:.0} ms in all)",
+            paths.exr.display(),
+            paths.png.display(),
+            t.elapsed().as_secs_f64() * 1e3,
+            self.start.elapsed().as_secs_f64() * 1e3
+        ));
+        if rendered.interrupted {
+            self.say.say(format!(
+                "interrupted after step {}: continue with the same flags and --resume ({})",
+                stats.iterations,
+                paths.checkpoint.display()
+            ));
+            return Err(Failure { status: 130, error: anyhow::anyhow!("interrupted") });
+        }
+        Ok(())
+    }
 }

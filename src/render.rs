@@ -350,8 +350,7 @@ impl<'a> Renderer<'a> {
                 .unwrap_or_else(|| fragment_bound(patches, buffers.radius, options.bundle_resolution));
             Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
         };
-        let estimate =
-            ImageEstimate::new(device, &buffers, &camera, &direct, iteration.as_ref().map(|i| &i.gather));
+        let estimate = ImageEstimate::new(device, &buffers, &camera, &direct, iteration.as_ref().map(|i| &i.gather));
         let burn_in = match options.iterations {
             0 => 0,
             _ => options.burn_in.unwrap_or_else(|| default_burn_in(scene)),
@@ -417,7 +416,13 @@ impl<'a> Renderer<'a> {
             let jitter = [rng.uniform() as f32, rng.uniform() as f32];
             self.write_camera(jitter);
             self.direct.prepare_pass(queue, (k - self.burn_in) as u64);
-            self.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, self.direct.count(), true);
+            self.estimate.set_params(
+                queue,
+                self.scene.environment,
+                self.buffers.patch_count,
+                self.direct.count(),
+                true,
+            );
         }
     }
 

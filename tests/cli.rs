@@ -4,110 +4,19 @@
 
 mod common;
 
+use common::bin::{firstshot_in, stderr, stdout};
+use common::scenes::{MINIMAL, edited};
+use common::scratch::{Scratch, listing};
 use firstshot::image::Image;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-const BIN: &str = env!("CARGO_BIN_EXE_firstshot");
-
-/// A fresh, empty folder under the system temp folder, removed when dropped.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(test: &str) -> Scratch {
-        let dir = std::env::temp_dir().join(format!("firstshot-cli-{}-{test}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("temp folder");
-        Scratch(dir)
-    }
-
-    /// A sub-folder, created empty.
-    fn dir(&self, name: &str) -> PathBuf {
-        let dir = self.0.join(name);
-        std::fs::create_dir_all(&dir).expect("temp sub-folder");
-        dir
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-/// Runs the binary in `cwd`, where a default output path (the scene's stem) would land.
-fn firstshot_in(cwd: &Path, args: &[&str]) -> Output {
-    Command::new(BIN).args(args).current_dir(cwd).output().expect("running the firstshot binary")
-}
+use std::path::Path;
+use std::process::Output;
 
 fn firstshot(args: &[&str]) -> Output {
     firstshot_in(&std::env::temp_dir(), args)
 }
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// Every path under `dir`, relative to it, sorted.
-fn listing(dir: &Path) -> Vec<String> {
-    fn walk(root: &Path, dir: &Path, out: &mut Vec<String>) {
-        for entry in std::fs::read_dir(dir).expect("read_dir") {
-            let path = entry.expect("dir entry").path();
-            out.push(path.strip_prefix(root).expect("under root").display().to_string());
-            if path.is_dir() {
-                walk(root, &path, out);
-            }
-        }
-    }
-    let mut out = Vec::new();
-    walk(dir, dir, &mut out);
-    out.sort();
-    out
-}
-
 fn cornell_box() -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.toml").display().to_string()
-}
-
-/// A small valid scene: one floor quad and one white material, lit by a point light.
-const MINIMAL: &str = r#"
-format = 1
-
-[camera]
-position = [0, 1, -5]
-look_at = [0, 1, 0]
-up = [0, 1, 0]
-fov_y = 40
-width = 16
-height = 16
-
-[materials.white]
-type = "diffuse"
-albedo = [0.5, 0.5, 0.5]
-
-[[shapes]]
-type = "quad"
-vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, 1], [1, 0, -1]]
-material = "white"
-
-[[lights]]
-type = "point"
-position = [0, 3, 0]
-power = [10, 10, 10]
-"#;
-
-/// MINIMAL with each `(from, to)` replaced once (each `from` must occur).
-fn edited(edits: &[(&str, &str)]) -> String {
-    let mut text = MINIMAL.to_string();
-    for (from, to) in edits {
-        assert!(text.contains(from), "{from:?} is not in the scene");
-        text = text.replacen(from, to, 1);
-    }
-    text
+    common::scenes::shipped("cornell_box").display().to_string()
 }
 
 /// Runs `args` with `--out <empty folder>/<out> --stats <empty folder>/s.json`, in that
@@ -137,7 +46,7 @@ fn one_line_naming(err: &str, file: &Path, key: &str) {
 
 #[test]
 fn test01_scene_refusals_exit_2_name_file_and_key_and_write_nothing() {
-    let scratch = Scratch::new("scene-refusals");
+    let scratch = Scratch::new("cli", "scene-refusals");
     let area_light = "[[lights]]\ntype = \"area\"\nvertices = [[0, 2, 0], [1, 2, 0], [1, 2.5, 1], [0, 2, 1]]\n\
                       radiance = [1, 1, 1]\n";
     let sierpinski = "[[shapes]]\ntype = \"sierpinski\"\ncenter = [0, 0, 0]\nsize = 1\nlevel = 50\n\
@@ -189,7 +98,7 @@ fn test01_scene_refusals_exit_2_name_file_and_key_and_write_nothing() {
 
 #[test]
 fn test02_usage_errors_exit_2_and_write_nothing() {
-    let scratch = Scratch::new("usage");
+    let scratch = Scratch::new("cli", "usage");
     let cb = cornell_box();
     let png = refused_render(&scratch, &[&cb], "x.png");
     assert!(png.contains("--out") && png.contains(".exr"), "{png}");
@@ -218,7 +127,7 @@ fn test02_usage_errors_exit_2_and_write_nothing() {
 /// machine without a GPU.
 #[test]
 fn test03_no_first_shot_with_a_point_light_is_a_usage_error() {
-    let scratch = Scratch::new("no-first-shot");
+    let scratch = Scratch::new("cli", "no-first-shot");
     let scene = scratch.dir("scene").join("point.toml");
     std::fs::write(&scene, MINIMAL).expect("write the scene");
     let err = refused_render(&scratch, &[&scene.display().to_string(), "--no-first-shot"], "x.exr");
@@ -248,9 +157,9 @@ fn test04_tiny_render_writes_exr_png_and_stats() {
     if common::gpu().is_none() {
         return;
     }
-    let scratch = Scratch::new("render");
-    let exr = scratch.0.join("sub/dir/cb.exr");
-    let stats = scratch.0.join("s.json");
+    let scratch = Scratch::new("cli", "render");
+    let exr = scratch.join("sub/dir/cb.exr");
+    let stats = scratch.join("s.json");
     let o = firstshot(&[
         &cornell_box(),
         "--iterations",
@@ -271,7 +180,7 @@ fn test04_tiny_render_writes_exr_png_and_stats() {
     assert_eq!(o.status.code(), Some(0), "stderr:\n{err}");
     assert_eq!(stdout(&o), "", "--quiet prints nothing");
     // Exactly the outputs: the missing folders made, no temporary file left beside them.
-    assert_eq!(listing(&scratch.0), ["s.json", "sub", "sub/dir", "sub/dir/cb.exr", "sub/dir/cb.png"]);
+    assert_eq!(listing(&scratch), ["s.json", "sub", "sub/dir", "sub/dir/cb.exr", "sub/dir/cb.png"]);
 
     let image = Image::read_exr(&exr).expect("cb.exr reads back");
     assert_eq!((image.width, image.height), (32, 32));
@@ -333,11 +242,11 @@ fn write_exr(path: &Path, width: u32, height: u32, value: [f32; 3]) {
 
 #[test]
 fn test06_compare() {
-    let scratch = Scratch::new("compare");
-    let path = |name: &str| scratch.0.join(name).display().to_string();
-    write_exr(&scratch.0.join("a.exr"), 8, 6, [0.55, 0.22, 1.1]);
-    write_exr(&scratch.0.join("b.exr"), 8, 6, [0.5, 0.2, 1.0]);
-    write_exr(&scratch.0.join("small.exr"), 4, 6, [0.5, 0.2, 1.0]);
+    let scratch = Scratch::new("cli", "compare");
+    let path = |name: &str| scratch.join(name).display().to_string();
+    write_exr(&scratch.join("a.exr"), 8, 6, [0.55, 0.22, 1.1]);
+    write_exr(&scratch.join("b.exr"), 8, 6, [0.5, 0.2, 1.0]);
+    write_exr(&scratch.join("small.exr"), 4, 6, [0.5, 0.2, 1.0]);
 
     let o = firstshot(&["compare", &path("a.exr"), &path("b.exr")]);
     assert_eq!(o.status.code(), Some(0), "stderr:\n{}", stderr(&o));
@@ -358,7 +267,7 @@ fn test06_compare() {
     let o = firstshot(&["compare", &path("a.exr"), &path("missing.exr")]);
     assert_ne!(o.status.code(), Some(0));
     assert!(stderr(&o).contains("missing.exr"), "{}", stderr(&o));
-    assert_eq!(listing(&scratch.0), ["a.exr", "b.exr", "small.exr"], "compare writes nothing");
+    assert_eq!(listing(&scratch), ["a.exr", "b.exr", "small.exr"], "compare writes nothing");
 }
 
 /// A bundle projection whose line table no buffer of the device holds: refused by
@@ -369,7 +278,7 @@ fn test07_bundle_resolution_beyond_the_buffers_is_a_limits_error() {
     if common::gpu().is_none() {
         return;
     }
-    let scratch = Scratch::new("bundle-limit");
+    let scratch = Scratch::new("cli", "bundle-limit");
     let scene = scratch.dir("scene").join("small.toml");
     std::fs::write(&scene, MINIMAL).expect("write the scene");
     let path = scene.display().to_string();

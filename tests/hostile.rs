@@ -2,18 +2,9 @@
 
 mod common;
 
+use common::bin::firstshot;
+use common::scratch::Scratch;
 use firstshot::scene;
-use std::path::PathBuf;
-use std::process::Command;
-
-const BIN: &str = env!("CARGO_BIN_EXE_firstshot");
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("firstshot-hostile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 const HEAD: &str = r#"format = 1
 [camera]
@@ -30,7 +21,7 @@ albedo = [0.5, 0.5, 0.5]
 
 #[test]
 fn test01_million_vertex_mesh_loads_and_tessellates() {
-    let dir = scratch("mesh");
+    let dir = Scratch::new("hostile", "mesh");
     // A 1000 x 1000 vertex grid: a million vertices, two million triangles.
     let n = 1000;
     let mut obj = String::with_capacity(40 * n * n);
@@ -54,15 +45,14 @@ fn test01_million_vertex_mesh_loads_and_tessellates() {
     let scene = scene::load(&path).unwrap();
     let patches = scene::tessellate(&scene, 1.0).unwrap();
     assert_eq!(patches.patches.len(), 2 * (n - 1) * (n - 1));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Runs the binary on a scene; it must exit 0 (rendered) or 2 (refused), never crash.
 fn survives(name: &str, shapes: &str, extra: &[&str]) -> (i32, String) {
-    let dir = scratch(name);
+    let dir = Scratch::new("hostile", name);
     let path = dir.join("scene.toml");
     std::fs::write(&path, format!("{HEAD}{shapes}")).unwrap();
-    let out = Command::new(BIN)
+    let out = firstshot()
         .arg(&path)
         .args(["--quiet", "--iterations", "3", "--bundle-resolution", "32", "--hemicube-resolution", "32"])
         .args(extra)
@@ -74,7 +64,6 @@ fn survives(name: &str, shapes: &str, extra: &[&str]) -> (i32, String) {
     let code = out.status.code().unwrap_or(-1);
     assert!(code == 0 || code == 2, "{name}: exit {code} (a crash?): {stderr}");
     assert!(!stderr.contains("panicked"), "{name}: {stderr}");
-    let _ = std::fs::remove_dir_all(&dir);
     (code, stderr)
 }
 

@@ -2,15 +2,16 @@
 //! refused before any GPU work, with `Error::Limits` (exit status 2) naming what is too big,
 //! the limit, and the flag that fixes it. No GPU needed: the limits are made up.
 
+mod common;
+
 use firstshot::Error;
 use firstshot::layout::{GpuPatch, GpuPatchState, RasterVertex};
 use firstshot::render::{RenderOptions, check_limits};
 use firstshot::scene::{self, Patches};
-use std::path::Path;
 
 /// The Cornell box, tessellated at its own patch size, with a 32 x 32 image.
 fn cornell_box() -> (Patches, RenderOptions) {
-    let scene = scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.toml")).expect("loads");
+    let scene = scene::load(&common::scenes::shipped("cornell_box")).expect("loads");
     let mut options = RenderOptions::from_scene(&scene);
     options.width = 32;
     options.height = 32;

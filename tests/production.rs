@@ -2,25 +2,19 @@
 
 mod common;
 
+use common::bin::firstshot;
+use common::scratch::Scratch;
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
-
-const BIN: &str = env!("CARGO_BIN_EXE_firstshot");
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("firstshot-production-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// A small, quick run of the Cornell box with enough steps to be stopped in the middle.
 fn args(out: &Path) -> Vec<String> {
-    let manifest = env!("CARGO_MANIFEST_DIR");
+    let scene = common::scenes::shipped("cornell_box");
     format!(
-        "{manifest}/scenes/cornell_box.toml --iterations 240 --width 48 --height 48 --bundle-resolution 96 \
+        "{} --iterations 240 --width 48 --height 48 --bundle-resolution 96 \
          --hemicube-resolution 64 --patch-size 80 --out {}",
+        scene.display(),
         out.display()
     )
     .split_whitespace()
@@ -33,13 +27,13 @@ fn test01_interrupted_and_resumed_run_gives_the_same_bits() {
     if common::gpu().is_none() {
         return;
     }
-    let dir = temp_dir("resume");
+    let dir = Scratch::new("production", "resume");
     let full = dir.join("full.exr");
-    let status = Command::new(BIN).args(args(&full)).arg("--quiet").status().unwrap();
+    let status = firstshot().args(args(&full)).arg("--quiet").status().unwrap();
     assert!(status.success());
 
     let run = dir.join("run.exr");
-    let mut child = Command::new(BIN).args(args(&run)).stderr(Stdio::piped()).spawn().unwrap();
+    let mut child = firstshot().args(args(&run)).stderr(Stdio::piped()).spawn().unwrap();
     // Wait until the iteration has begun (the first-shot phase is announced), then stop it
     // at a moment that changes from run to run.
     let stderr = BufReader::new(child.stderr.take().unwrap());
@@ -61,12 +55,11 @@ fn test01_interrupted_and_resumed_run_gives_the_same_bits() {
     } else {
         assert_eq!(status.code(), Some(130), "Ctrl-C exits with 130: {rest:?}");
         assert!(run.exists() && dir.join("run.checkpoint").exists(), "image and checkpoint written: {rest:?}");
-        let resumed = Command::new(BIN).args(args(&run)).args(["--resume", "--quiet"]).output().unwrap();
+        let resumed = firstshot().args(args(&run)).args(["--resume", "--quiet"]).output().unwrap();
         assert!(resumed.status.success(), "{}", String::from_utf8_lossy(&resumed.stderr));
     }
     let (a, b) = (std::fs::read(&full).unwrap(), std::fs::read(&run).unwrap());
     assert!(a == b, "the resumed EXR differs from the uninterrupted one ({})", dir.display());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -74,14 +67,14 @@ fn test02_checkpoints_that_do_not_belong_are_refused() {
     if common::gpu().is_none() {
         return;
     }
-    let dir = temp_dir("refuse");
+    let dir = Scratch::new("production", "refuse");
     let out = dir.join("run.exr");
-    let ok = Command::new(BIN).args(args(&out)).args(["--quiet", "--checkpoint-every", "1000"]).status().unwrap();
+    let ok = firstshot().args(args(&out)).args(["--quiet", "--checkpoint-every", "1000"]).status().unwrap();
     assert!(ok.success());
     let checkpoint = dir.join("run.checkpoint");
     assert!(checkpoint.exists(), "--checkpoint-every writes the final state");
     // Other flags.
-    let other = Command::new(BIN).args(args(&out)).args(["--seed", "99", "--resume"]).output().unwrap();
+    let other = firstshot().args(args(&out)).args(["--seed", "99", "--resume"]).output().unwrap();
     assert_eq!(other.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&other.stderr).contains("another scene or other flags"));
     // A damaged file.
@@ -89,29 +82,27 @@ fn test02_checkpoints_that_do_not_belong_are_refused() {
     let middle = bytes.len() / 2;
     bytes[middle] ^= 0xff;
     std::fs::write(&checkpoint, &bytes).unwrap();
-    let corrupt = Command::new(BIN).args(args(&out)).arg("--resume").output().unwrap();
+    let corrupt = firstshot().args(args(&out)).arg("--resume").output().unwrap();
     assert_eq!(corrupt.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&corrupt.stderr).contains("not a usable checkpoint"));
     // None at all.
     std::fs::remove_file(&checkpoint).unwrap();
-    let missing = Command::new(BIN).args(args(&out)).arg("--resume").output().unwrap();
+    let missing = firstshot().args(args(&out)).arg("--resume").output().unwrap();
     assert_eq!(missing.status.code(), Some(2));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn test03_unwritable_output_fails_with_status_1_before_any_work() {
-    let dir = temp_dir("unwritable");
+    let dir = Scratch::new("production", "unwritable");
     // A directory that cannot exist: its parent is a file.
     let blocker = dir.join("file");
     std::fs::write(&blocker, b"x").unwrap();
     let out = blocker.join("sub").join("x.exr");
-    let result = Command::new(BIN).args(args(&out)).output().unwrap();
+    let result = firstshot().args(args(&out)).output().unwrap();
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert_eq!(result.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("file"), "the message names the path: {stderr}");
     assert!(!stderr.contains("adapter:"), "no GPU work before the check: {stderr}");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -13,18 +13,8 @@ use firstshot::scene::{Material, MaterialKind, Patches};
 use glam::DVec3;
 
 const RESOLUTION: u32 = 64;
-const STAGES: [&str; 10] = [
-    "clear",
-    "reflect",
-    "count",
-    "prefix_sum",
-    "fill",
-    "transfer",
-    "finalize",
-    "light_windows",
-    "camera",
-    "estimate",
-];
+const STAGES: [&str; 10] =
+    ["clear", "reflect", "count", "prefix_sum", "fill", "transfer", "finalize", "light_windows", "camera", "estimate"];
 
 /// A closed diffuse room with glowing walls, seen from inside: every step has work in
 /// every stage.

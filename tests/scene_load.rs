@@ -1,66 +1,22 @@
 //! `scene::load` against SCENE_FORMAT.md: what loads, what is refused (with which key), and
 //! that no input makes it panic.
 
+mod common;
+
+use common::scenes::{MINIMAL, edited};
+use common::scratch::{Scratch, write};
 use firstshot::Error;
 use firstshot::scene::load::load_str;
 use firstshot::scene::{Light, MaterialKind, Scene, Settings, brdf, load};
 use glam::DVec3;
 use proptest::prelude::*;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Rounding tolerance for areas and positions of unit-sized f64 geometry.
 const EPS: f64 = 1e-9;
 
-/// The smallest scene that loads: one floor quad lit by one point light.
-const MINIMAL: &str = r#"
-format = 1
-
-[camera]
-position = [0, 1, -5]
-look_at = [0, 1, 0]
-up = [0, 1, 0]
-fov_y = 40
-width = 64
-height = 48
-
-[materials.white]
-type = "diffuse"
-albedo = [0.5, 0.5, 0.5]
-
-[[shapes]]
-type = "quad"
-vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, 1], [1, 0, -1]]
-material = "white"
-
-[[lights]]
-type = "point"
-position = [0, 3, 0]
-power = [10, 10, 10]
-"#;
-
-/// A folder of its own for each test, so that tests running in parallel never share files.
-fn scratch(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("firstshot-scene-load-{}", std::process::id())).join(test);
-    std::fs::create_dir_all(dir.join("meshes")).expect("temp folder");
-    dir
-}
-
-fn write(path: &Path, text: impl AsRef<[u8]>) {
-    std::fs::write(path, text).expect("write temp file");
-}
-
 fn source() -> &'static Path {
     Path::new("memory/scene.toml")
-}
-
-/// MINIMAL with each `(from, to)` replaced (each `from` must occur).
-fn edited(edits: &[(&str, &str)]) -> String {
-    let mut text = MINIMAL.to_string();
-    for (from, to) in edits {
-        assert!(text.contains(from), "{from:?} is not in the scene");
-        text = text.replacen(from, to, 1);
-    }
-    text
 }
 
 /// Asserts that `text` is refused with `key`, and returns the message.
@@ -89,7 +45,7 @@ fn triangle_area(t: &[DVec3; 3]) -> f64 {
 
 #[test]
 fn test01_cornell_box_loads() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.toml");
+    let path = common::scenes::shipped("cornell_box");
     let scene = load(&path).unwrap();
     assert_eq!(scene.source, path);
     assert_eq!(scene.materials.len(), 3);
@@ -135,7 +91,7 @@ fn test02_defaults() {
 /// The example of SCENE_FORMAT.md, every key of the contract, loads as written.
 #[test]
 fn test03_the_contract_example_loads() {
-    let dir = scratch("contract");
+    let dir = Scratch::new("scene-load", "contract");
     write(&dir.join("meshes/bunny.obj"), "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
     let text = r#"
 format = 1
@@ -275,7 +231,7 @@ transform = { scale = [2, 1, 1], rotate = [0, 0, 1, 90], translate = [10, 0, 0] 
 
 #[test]
 fn test06_obj_polygons_negative_indices_and_usemtl() {
-    let dir = scratch("obj");
+    let dir = Scratch::new("scene-load", "obj");
     write(
         &dir.join("meshes/thing.obj"),
         "\
@@ -320,7 +276,7 @@ f 1 2 -1
 
 #[test]
 fn test07_mesh_material_is_optional_only_if_every_face_has_usemtl() {
-    let dir = scratch("usemtl");
+    let dir = Scratch::new("scene-load", "usemtl");
     let mesh = "[[shapes]]\ntype = \"mesh\"\nfile = \"meshes/m.obj\"\n\n[[shapes]]";
     let path = dir.join("scene.toml");
     write(&path, edited(&[("[[shapes]]", mesh)]));
@@ -333,7 +289,7 @@ fn test07_mesh_material_is_optional_only_if_every_face_has_usemtl() {
 
 #[test]
 fn test08_obj_errors_name_the_mesh_file_and_line() {
-    let dir = scratch("obj_errors");
+    let dir = Scratch::new("scene-load", "obj_errors");
     let path = dir.join("scene.toml");
     write(
         &path,
@@ -368,7 +324,7 @@ fn test08_obj_errors_name_the_mesh_file_and_line() {
 
 #[test]
 fn test09_missing_mesh_file() {
-    let dir = scratch("missing_mesh");
+    let dir = Scratch::new("scene-load", "missing_mesh");
     let path = dir.join("scene.toml");
     write(
         &path,
@@ -386,7 +342,7 @@ fn test09_missing_mesh_file() {
 fn test10_scene_file_problems() {
     let missing = load(Path::new("/nonexistent/firstshot/scene.toml"));
     assert!(matches!(missing, Err(Error::Io { .. })), "{missing:?}");
-    let dir = scratch("bytes");
+    let dir = Scratch::new("scene-load", "bytes");
     let path = dir.join("scene.toml");
     write(&path, b"format = 1\n\xff\xfe\n");
     assert_contains(&refused_at(load(&path), "line 2"), "UTF-8");
@@ -827,7 +783,7 @@ proptest! {
             0..20,
         ),
     ) {
-        let dir = scratch("fuzz");
+        let dir = Scratch::new("scene-load", "fuzz");
         write(&dir.join("meshes/fuzz.obj"), obj.join("\n"));
         let text = format!("{MINIMAL}\n{}", shapes.join("\n"));
         if let Ok(scene) = load_str(&text, &dir.join("scene.toml")) {
@@ -842,7 +798,7 @@ proptest! {
     fn test22_random_bytes_through_the_file_never_panic(
         bytes in prop::collection::vec(any::<u8>(), 0..200)
     ) {
-        let dir = scratch("bytes_fuzz");
+        let dir = Scratch::new("scene-load", "bytes_fuzz");
         let path = dir.join("scene.toml");
         write(&path, &bytes);
         let _ = load(&path);

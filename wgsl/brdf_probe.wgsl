@@ -1,11 +1,10 @@
 // BRDF probe: evaluates `brdf` (wgsl/common/brdf.wgsl) for a list of queries, so that a test
 // can compare it with the host's `scene::brdf::eval`. Test instrument, not part of a render.
 //
-// Compute, workgroup 64, one invocation per query. Bindings (group 0):
-//   0 materials  array<Material>          read
-//   1 queries    array<vec4<f32>>         read (4 per query: n, w_in, w_out, (material, 0, 0, 0))
-//   2 results    array<vec4<f32>>         read_write (rgb f, one per query)
-// Host: src/stages/brdf_probe.rs.
+// Compute, one invocation per query: queries holds 4 vec4 per query (n, w_in, w_out,
+// (material, 0, 0, 0)), results the rgb f of each.
+// Host: src/stages/brdf_probe.rs. Its `SPEC` is the one statement of the bindings (names,
+// kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<storage, read> materials: array<Material>;
 @group(0) @binding(1) var<storage, read> queries: array<vec4<f32>>;

@@ -1,15 +1,10 @@
 // Bundle finalize (DESIGN.md 2.4): J_j = (dP / A_j) * (sum of received radiance) from the
 // fixed-point sums, win_j = -s_j d; the sums are cleared for the next step.
 //
-// Compute, workgroup 64, one invocation per patch (2D dispatch past 65535 workgroups).
-// Bindings, group 0:
-//   0 bundle     uniform Bundle          read
-//   1 patches    array<Patch>            read
-//   2 sums       array<u32>              read_write (6 per patch; one invocation per patch)
-//   3 max_bits   array<u32>              read
-//   4 outgoing   array<vec4<f32>>        read (w: s_j)
-//   5 state      array<PatchState>       read_write (one writer per patch)
-// Host: src/stages/bundle_finalize.rs.
+// Compute, one invocation per patch (2D dispatch past 65535 workgroups): each patch's 6
+// sums and its state have one writer.
+// Host: src/stages/bundle_finalize.rs. Its `SPEC` is the one statement of the bindings (names,
+// kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> bundle: Bundle;
 @group(0) @binding(1) var<storage, read> patches: array<Patch>;

@@ -3,17 +3,12 @@
 // with Le left out for first-shot lights (their first reflection replaces them), and the
 // largest O of the step (for the fixed-point scale of the transfer).
 //
-// Compute, workgroup 64, one invocation per patch (2D dispatch past 65535 workgroups).
-// Bindings, group 0:
-//   0 bundle     uniform Bundle        read
-//   1 patches    array<Patch>          read
-//   2 materials  array<Material>       read
-//   3 state      array<PatchState>     read (J_j, win_j of the previous step)
-//   4 outgoing   array<vec4<f32>>      read_write (rgb O_j, w s_j; one writer per patch)
-//   5 max_bits   atomic<u32>           read_write (bits of the largest O channel; positive
-//                                      floats order like their bits)
+// Compute, one invocation per patch (2D dispatch past 65535 workgroups), the only writer
+// of its `outgoing` (rgb O_j, w s_j). `max_bits` takes the largest O channel by its bits
+// (positive floats order like their bits).
 // Group 1: the first-shot table (wgsl/common/first_shot_table.wgsl).
-// Host: src/stages/bundle_reflect.rs.
+// Host: src/stages/bundle_reflect.rs. Its `SPEC` is the one statement of the bindings (names,
+// kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> bundle: Bundle;
 @group(0) @binding(1) var<storage, read> patches: array<Patch>;

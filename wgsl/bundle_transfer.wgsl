@@ -5,16 +5,10 @@
 // fixed-point sums (scaled so the step's largest radiance fits in 31 bits), so the result
 // does not depend on thread order and needs no float atomics.
 //
-// Compute, workgroup 64, one invocation per line (2D dispatch past 65535 workgroups).
-// Bindings, group 0:
-//   0 bundle     uniform Bundle          read
-//   1 offsets    array<u32>              read (line starts, resolution^2 + 1)
-//   2 fragments  array<vec2<u32>>        read_write (depth bits, patch | FRAGMENT_FRONT_BIT;
-//                                        each line's slice sorted in place by its invocation)
-//   3 outgoing   array<vec4<f32>>        read (O_j from bundle_reflect)
-//   4 sums       array<atomic<u32>>      read_write (6 per patch: lo, hi per channel)
-//   5 max_bits   array<u32>              read (largest radiance of the step)
-// Host: src/stages/bundle_transfer.rs.
+// Compute, one invocation per line (2D dispatch past 65535 workgroups), which sorts its
+// own slice of the fragments in place.
+// Host: src/stages/bundle_transfer.rs. Its `SPEC` is the one statement of the bindings (names,
+// kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> bundle: Bundle;
 @group(0) @binding(1) var<storage, read> offsets: array<u32>;

@@ -5,17 +5,10 @@
 // The order inside a slice is whatever the rasteriser produced: bundle_transfer sorts it.
 //
 // Render pass, no culling, no depth test, a depth-only attachment that nothing reads.
-// Vertex input: RasterVertex. Bindings, group 0:
-//   0 bundle     uniform Bundle          read
-//   1 counts     array<atomic<u32>>      read_write (resolution^2 + 1; fs_count)
-//   2 offsets    array<u32>              read (exclusive prefix sums of counts; fs_fill)
-//   3 cursor     array<atomic<u32>>      read_write (resolution^2; fs_fill)
-//   4 fragments  array<vec2<u32>>        read_write (bits of depth, patch | FRAGMENT_FRONT_BIT
-//                                        when the patch's front faces +d; fs_fill)
-//   5 overflow   atomic<u32>             read_write (set when a slot lies past capacity:
-//                                        the host grows the list and redoes the steps)
-//   6 outgoing   array<vec4<f32>>        read (w: s_j from bundle_reflect; fs_fill)
-// Host: src/stages/bundle_visibility.rs.
+// Vertex input: RasterVertex. A slot past the capacity sets `overflow`: the host grows the
+// list and redoes the steps.
+// Host: src/stages/bundle_visibility.rs. Its `SPEC` is the one statement of the bindings
+// (names, kinds, access); tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> bundle: Bundle;
 @group(0) @binding(1) var<storage, read_write> counts: array<atomic<u32>>;

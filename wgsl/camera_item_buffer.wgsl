@@ -2,12 +2,13 @@
 // sub-pixel sample position.
 //
 // Render pass. Vertex input: RasterVertex (location 0 position, location 1 patch id with
-// VERTEX_TWIN_BIT). Bindings: group 0 binding 0 `camera` (uniform Camera, read).
+// VERTEX_TWIN_BIT).
 // Target: R32Uint patch index + 1 (NO_PATCH where nothing), Depth32Float reversed-z
 // (greater is nearer, cleared to 0). No culling: a back face is black but still occludes.
 // Invariant: the sample point (pixel + camera.jitter) lands on the rasteriser's pixel
 // centre, so `image_estimate` can rebuild the exact ray of every pixel.
-// Host: src/stages/camera_item_buffer.rs.
+// Host: src/stages/camera_item_buffer.rs. Its `SPEC` is the one statement of the bindings
+// (names, kinds, access); tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> camera: Camera;
 

@@ -7,21 +7,11 @@
 // Sums are exact 64-bit integers (weights in [0, 1] times FIXED_POINT_SCALE, split over two
 // u32 atomics), so the result does not depend on thread order and needs no float atomics.
 //
-// Compute. reduce_face: workgroup 8 x 8, one invocation per face pixel. append_sample:
-// workgroup 64, one invocation per patch (2D dispatch past 65535 workgroups).
-// Bindings (group 0):
-//   0 face        uniform Camera          read   (reduce_face)
-//   1 params      uniform FaceParams      read   (reduce_face)
-//   2 item_buffer texture_2d<u32>         read   (reduce_face)
-//   3 patches     array<Patch>            read
-//   4 samples     array<LightSample>      read   (reduce_face)
-//   5 sums        array<atomic<u32>>      read_write (lo, hi per patch)
-//   6 append      uniform AppendParams    read   (append_sample)
-//   7 row_counts  array<u32>              read_write (pairs per patch; one writer per patch)
-//   8 pairs       array<vec4<u32>>        read_write (patch, sample, bits of r_ij, 0)
-//   9 pair_count  atomic<u32>             read_write (may exceed capacity: then the host
-//                                         grows the list and runs the first shot again)
-// Host: src/stages/first_shot_reduce.rs.
+// Compute. reduce_face: one invocation per face pixel. append_sample: one invocation per
+// patch (2D dispatch past 65535 workgroups), the only writer of its row count. The pair
+// count may exceed the capacity: then the host grows the list and runs the first shot again.
+// Host: src/stages/first_shot_reduce.rs. Its `SPEC` is the one statement of the bindings (names,
+// kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> face: Camera;
 @group(0) @binding(1) var<uniform> params: FaceParams;

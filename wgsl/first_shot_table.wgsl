@@ -4,16 +4,10 @@
 // on the order in which the pairs were appended; `row_irradiance` sums S_i r_ij over each
 // row, which is all a diffuse patch needs (its BRDF does not depend on the directions).
 //
-// Compute, workgroup 64. fill_rows: one invocation per pair; sort_rows, row_irradiance:
-// one per patch (2D dispatch past 65535 workgroups). Bindings (group 0):
-//   0 params   uniform vec4<u32> (x: pairs, y: patches)  read
-//   1 pairs    array<vec4<u32>>     read
-//   2 offsets  array<u32>           read (patches + 1 row starts)
-//   3 cursor   array<atomic<u32>>   read_write (zeroed before fill_rows)
-//   4 entries  array<vec2<u32>>     read_write (sample, bits of r_ij)
-//   5 samples  array<LightSample>   read
-//   6 irradiance array<vec4<f32>>   read_write (rgb sum_i S_i r_ij per patch)
-// Host: src/stages/first_shot_table.rs.
+// Compute. fill_rows: one invocation per pair; sort_rows, row_irradiance: one per patch
+// (2D dispatch past 65535 workgroups). The cursor is zeroed before fill_rows.
+// Host: src/stages/first_shot_table.rs. Its `SPEC` is the one statement of the bindings (names,
+// kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> params: vec4<u32>;
 @group(0) @binding(1) var<storage, read> pairs: array<vec4<u32>>;

@@ -17,22 +17,10 @@
 // plane, among the fragments of the line near x) sends O_m if its front faces x, black if
 // its back does; the environment if there is none.
 //
-// Compute, workgroup 8 x 8, one invocation per pixel. Bindings:
-//   group 0: 0 camera        uniform Camera              read
-//            1 params        uniform EstimateParams      read
-//            2 item_buffer   texture_2d<u32>             read (camera: patch index + 1)
-//            3 patches       array<Patch>                read
-//            4 materials     array<Material>             read
-//            5 image_sum     array<vec4<f32>>            read_write (one pixel per invocation)
-//   group 1: 0 lights        array<DirectLight>          read
-//            1 faces         array<WindowFace>           read
-//            2 kept_atlas    texture_2d<u32>             read (faces with tile.w == 0)
-//            3 pass_atlas    texture_2d<u32>             read (faces with tile.w == 1)
-//   group 2: 0 bundle        uniform Bundle              read
-//            1 offsets       array<u32>                  read (line starts)
-//            2 fragments     array<vec2<u32>>            read (each line sorted by depth)
-//            3 outgoing      array<vec4<f32>>            read (O_j of this step)
-// Host: src/stages/image_estimate.rs.
+// Compute, one invocation per pixel: the only writer of its image_sum. Group 1: the direct
+// lights and their window atlases; group 2: this step's bundle, sorted by bundle_transfer.
+// Host: src/stages/image_estimate.rs. Its `SPEC` is the one statement of the bindings (names,
+// kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> camera: Camera;
 @group(0) @binding(1) var<uniform> params: EstimateParams;

@@ -4,12 +4,13 @@
 // and the scissor to the rows inside the window.
 //
 // Render pass. Vertex input: RasterVertex (location 0 position, location 1 patch id with
-// VERTEX_TWIN_BIT). Bindings: group 0 binding 0 `faces` (array<WindowFace>, read, vertex).
+// VERTEX_TWIN_BIT).
 // Target: R32Uint patch index + 1 (NO_PATCH where nothing), Depth32Float reversed-z (greater
 // is nearer, cleared to 0). No culling: a surface seen from its back still occludes.
 // Invariant: a face's pixel (i, j) holds the surface seen through its centre, as for the
 // camera (`camera_item_buffer.wgsl`), so `image_estimate` can find the texels around any
-// direction. Host: src/stages/light_window.rs.
+// direction. Host: src/stages/light_window.rs. Its `SPEC` is the one statement of the
+// bindings; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<storage, read> faces: array<WindowFace>;
 

@@ -3,16 +3,12 @@
 // `add_block_offsets` adds each block's scanned total back. Integer sums: exact and
 // independent of thread order.
 //
-// Compute, workgroup PREFIX_SUM_WORKGROUP (256), PREFIX_SUM_PER_THREAD (16) values per
-// invocation (BLOCK = 4096): long runs per thread keep the barrier-bound workgroup scan a
-// small share of the work on CPU adapters. Bindings (group 0):
-//   0 params      uniform vec4<u32> (x: n)   read
-//   1 values      array<u32>                 read (n counts)
-//   2 scanned     array<u32>                 read_write (n exclusive prefix sums)
-//   3 block_sums  array<u32>                 read_write (scan_blocks: writes one per block;
-//                                            add_block_offsets: reads the scanned ones)
+// Compute, workgroup PREFIX_SUM_WORKGROUP, PREFIX_SUM_PER_THREAD values per invocation
+// (both from src/layout.rs): long runs per thread keep the barrier-bound workgroup scan a
+// small share of the work on CPU adapters.
 // Invariant: dispatches cover ceil(n / BLOCK) workgroups (2D when above 65535).
-// Host: src/stages/prefix_sum.rs.
+// Host: src/stages/prefix_sum.rs. Its `SPEC` is the one statement of the bindings (names,
+// kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 // PREFIX_SUM_WORKGROUP and PREFIX_SUM_PER_THREAD come from the generated header.
 const WORKGROUP: u32 = PREFIX_SUM_WORKGROUP;

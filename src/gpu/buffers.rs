@@ -87,31 +87,3 @@ pub fn read_back_at<T: bytemuck::Pod>(
     staging.unmap();
     Ok(out)
 }
-
-/// Bind-group layout entry for a storage buffer visible to compute shaders.
-pub fn storage_entry(binding: u32, read_only: bool, min_size: u64) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: std::num::NonZeroU64::new(min_size),
-        },
-        count: None,
-    }
-}
-
-/// Bind-group layout entry for a uniform buffer of `T`.
-pub fn uniform_entry<T>(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: std::num::NonZeroU64::new(std::mem::size_of::<T>() as u64),
-        },
-        count: None,
-    }
-}

@@ -1,6 +1,7 @@
 //! WGSL sources: every kernel is one file in `wgsl/`, compiled with the generated constant
 //! header and the shared files of `wgsl/common/` in front of it.
 
+use crate::gpu::scene_buffers::FIRST_SHOT_TABLE_GROUP;
 use crate::layout;
 
 /// Shared WGSL, prepended to every kernel in this order.
@@ -12,8 +13,11 @@ const COMMON: &[(&str, &str)] = &[
 /// Shared WGSL that declares bindings (group 1), prepended only to the kernels that use it.
 const FIRST_SHOT_TABLE: &str = include_str!("../../wgsl/common/first_shot_table.wgsl");
 
-/// Kernels that evaluate the first-shot radiance and so bind the table as group 1.
-const USES_FIRST_SHOT_TABLE: &[&str] = &["bundle_reflect"];
+/// Whether kernel `stem` binds the first-shot table (its spec's group 1), so needs the
+/// shared WGSL that declares it.
+fn uses_first_shot_table(stem: &str) -> bool {
+    crate::stages::SPECS.iter().any(|s| s.stem == stem && s.groups.contains(&FIRST_SHOT_TABLE_GROUP))
+}
 
 /// Every kernel of the pipeline, by stem (`wgsl/<stem>.wgsl`, `src/stages/<stem>.rs`).
 pub const KERNELS: &[(&str, &str)] = &[
@@ -43,7 +47,7 @@ pub fn source(stem: &str) -> String {
         out.push_str(&format!("\n// ---- {name}\n"));
         out.push_str(src);
     }
-    if USES_FIRST_SHOT_TABLE.contains(&stem) {
+    if uses_first_shot_table(stem) {
         out.push_str("\n// ---- common/first_shot_table.wgsl\n");
         out.push_str(FIRST_SHOT_TABLE);
     }
@@ -62,83 +66,18 @@ pub fn module(device: &wgpu::Device, stem: &str) -> wgpu::ShaderModule {
 
 /// Parses and validates a kernel with naga, as the unit tests do for every kernel.
 pub fn validate(stem: &str) -> std::result::Result<naga::Module, String> {
+    reflect(stem).map(|(module, _)| module)
+}
+
+/// The parsed kernel and naga's analysis of it (which globals each entry point uses), for
+/// holding a `KernelSpec` against the WGSL (`bindings::check`).
+pub fn reflect(stem: &str) -> std::result::Result<(naga::Module, naga::valid::ModuleInfo), String> {
     let src = source(stem);
     let module = naga::front::wgsl::parse_str(&src).map_err(|e| e.emit_to_string(&src))?;
-    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
         .validate(&module)
         .map_err(|e| e.emit_to_string(&src))?;
-    Ok(module)
-}
-
-/// A compute pipeline for entry point `entry` of kernel `stem` over explicit layouts.
-pub fn compute_pipeline(
-    device: &wgpu::Device,
-    module: &wgpu::ShaderModule,
-    stem: &str,
-    entry: &str,
-    layouts: &[&wgpu::BindGroupLayout],
-) -> wgpu::ComputePipeline {
-    let layouts: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().map(|l| Some(*l)).collect();
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(&format!("firstshot.{stem}.{entry}.layout")),
-        bind_group_layouts: &layouts,
-        immediate_size: 0,
-    });
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(&format!("firstshot.{stem}.{entry}")),
-        layout: Some(&pipeline_layout),
-        module,
-        entry_point: Some(entry),
-        compilation_options: Default::default(),
-        cache: None,
-    })
-}
-
-/// A bind group whose entry i is buffer i, whole.
-pub fn buffer_bind_group(
-    device: &wgpu::Device,
-    label: &str,
-    layout: &wgpu::BindGroupLayout,
-    resources: &[&wgpu::Buffer],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry> = resources
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-        .collect();
-    device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
-}
-
-/// A bind-group layout of buffers: `(uniform?, read_only, min_size)` per binding, in order.
-/// Uniforms are visible to `visibility`; storage buffers only to its fragment and compute
-/// stages when they are writable (writable storage in vertex shaders is an optional
-/// feature, which the portable path does without).
-pub fn buffer_layout(
-    device: &wgpu::Device,
-    label: &str,
-    visibility: wgpu::ShaderStages,
-    bindings: &[(bool, bool, u64)],
-) -> wgpu::BindGroupLayout {
-    let writable_visibility = visibility - wgpu::ShaderStages::VERTEX;
-    let entries: Vec<wgpu::BindGroupLayoutEntry> = bindings
-        .iter()
-        .enumerate()
-        .map(|(i, &(uniform, read_only, min))| wgpu::BindGroupLayoutEntry {
-            binding: i as u32,
-            visibility: if uniform || read_only { visibility } else { writable_visibility },
-            ty: wgpu::BindingType::Buffer {
-                ty: if uniform {
-                    wgpu::BufferBindingType::Uniform
-                } else {
-                    wgpu::BufferBindingType::Storage { read_only }
-                },
-                has_dynamic_offset: false,
-                min_binding_size: std::num::NonZeroU64::new(min),
-            },
-            count: None,
-        })
-        .collect();
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
+    Ok((module, info))
 }
 
 /// Records one compute dispatch of `pipeline` over `groups` workgroups (x, y) in a pass
@@ -157,20 +96,6 @@ pub fn dispatch(
         pass.set_bind_group(i as u32, *group, &[]);
     }
     pass.dispatch_workgroups(groups.0, groups.1, 1);
-}
-
-/// Bind-group layout entry of a `texture_2d<u32>` read by a compute shader (item buffers).
-pub fn uint_texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Uint,
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
 }
 
 #[cfg(test)]

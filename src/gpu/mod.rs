@@ -1,6 +1,7 @@
-//! The GPU host: adapters and devices (`context`), WGSL kernels (`kernel`), and small buffer
-//! helpers (`buffers`). Stages in `crate::stages` build on these.
+//! The GPU host: adapters and devices (`context`), WGSL kernels (`kernel`) and what they bind
+//! (`bindings`), and small buffer helpers (`buffers`). Stages in `crate::stages` build on these.
 
+pub mod bindings;
 pub mod buffers;
 pub mod context;
 pub mod kernel;

@@ -1,6 +1,7 @@
 //! The scene on the GPU: patches, materials, light samples, the triangles to rasterise and
 //! the per-patch iteration state. Built once per render; stages bind what they need.
 
+use super::bindings::{self, Binding, read};
 use super::buffers;
 use crate::layout::*;
 use crate::scene::{MaterialKind, PatchKind, Patches, SampleKind, Scene};
@@ -169,37 +170,39 @@ pub struct FirstShotTable {
     pub entry_count: u32,
 }
 
-impl FirstShotTable {
-    /// Bind group 1 of the kernels that evaluate first-shot radiance
-    /// (`wgsl/common/first_shot_table.wgsl`).
-    pub fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("firstshot.first_shot_table.layout"),
-            entries: &[
-                buffers::storage_entry(0, true, 4),
-                buffers::storage_entry(1, true, 8),
-                buffers::storage_entry(2, true, std::mem::size_of::<GpuLightSample>() as u64),
-                buffers::storage_entry(3, true, 16),
-            ],
-        })
-    }
+/// Bind group 1 of the kernels that evaluate first-shot radiance
+/// (`wgsl/common/first_shot_table.wgsl`), in their `KernelSpec`s.
+pub const FIRST_SHOT_TABLE_GROUP: &[Binding] = &[
+    // Row starts, patches + 1.
+    read::<u32>("fs_offsets"),
+    // (sample, bits of r_ij).
+    read::<[u32; 2]>("fs_entries"),
+    read::<GpuLightSample>("samples"),
+    // rgb sum_i S_i r_ij per patch.
+    read::<[f32; 4]>("fs_irradiance"),
+];
 
+impl FirstShotTable {
+    /// The table as bind group 1 (`FIRST_SHOT_TABLE_GROUP`) over `layout`, with the light
+    /// samples it indexes.
     pub fn bind_group(
         &self,
         device: &wgpu::Device,
         layout: &wgpu::BindGroupLayout,
         samples: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("firstshot.first_shot_table.bind_group"),
+        bindings::bind_group(
+            device,
+            "firstshot.first_shot_table.bind_group",
             layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: self.offsets.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: self.entries.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: samples.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: self.irradiance.as_entire_binding() },
+            FIRST_SHOT_TABLE_GROUP,
+            &[
+                ("fs_offsets", (&self.offsets).into()),
+                ("fs_entries", (&self.entries).into()),
+                ("samples", samples.into()),
+                ("fs_irradiance", (&self.irradiance).into()),
             ],
-        })
+        )
     }
 
     /// No light pairs: every patch's row is empty.

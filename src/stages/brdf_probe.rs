@@ -2,9 +2,25 @@
 //! that tests can hold it against the host's `scene::brdf::eval`.
 
 use crate::Result;
+use crate::gpu::bindings::{KernelSpec, Resource, compute, read, read_write};
 use crate::gpu::{Context, buffers, kernel};
 use crate::layout::GpuMaterial;
 use glam::Vec3;
+
+/// A test instrument, not part of a render.
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "brdf_probe",
+    visibility: wgpu::ShaderStages::COMPUTE,
+    // One invocation per query.
+    entry_points: &[compute("main", [64, 1, 1])],
+    groups: &[&[
+        read::<GpuMaterial>("materials"),
+        // 4 per query: n, w_in, w_out, (material, 0, 0, 0).
+        read::<[f32; 4]>("queries"),
+        // rgb f, one per query.
+        read_write::<[f32; 4]>("results"),
+    ]],
+};
 
 /// One query: material index, normal, w_in, w_out (unit, pointing away from the surface).
 #[derive(Debug, Clone, Copy)]
@@ -18,7 +34,6 @@ pub struct BrdfQuery {
 /// Evaluates every query on the GPU and returns f per query.
 pub fn evaluate(ctx: &Context, materials: &[GpuMaterial], queries: &[BrdfQuery]) -> Result<Vec<[f32; 3]>> {
     let device = &ctx.device;
-    let module = kernel::module(device, "brdf_probe");
     let packed: Vec<[f32; 4]> = queries
         .iter()
         .flat_map(|q| {
@@ -39,41 +54,23 @@ pub fn evaluate(ctx: &Context, materials: &[GpuMaterial], queries: &[BrdfQuery])
         16 * queries.len() as u64,
         wgpu::BufferUsages::COPY_SRC,
     );
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("firstshot.brdf_probe.pipeline"),
-        layout: None,
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("firstshot.brdf_probe.bind_group"),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &[
-            wgpu::BindGroupEntry { binding: 0, resource: materials.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 1, resource: queries_buf.as_entire_binding() },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &results,
-                    offset: 0,
-                    size: std::num::NonZeroU64::new(16 * queries.len().max(1) as u64),
-                }),
-            },
+    let built = SPEC.build(device);
+    let pipeline = built.compute_pipeline(device, "main");
+    // Bound to the queries' length, which `arrayLength(&results)` reports to the kernel.
+    let results_size = std::num::NonZeroU64::new(16 * queries.len().max(1) as u64).expect("non-zero");
+    let bind_group = built.bind_group(
+        device,
+        0,
+        &[
+            ("materials", (&materials).into()),
+            ("queries", (&queries_buf).into()),
+            ("results", Resource::BufferPrefix(&results, results_size)),
         ],
-    });
+    );
     let mut encoder =
         device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.brdf_probe") });
-    {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("firstshot.brdf_probe.pass"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups((queries.len() as u32).div_ceil(64), 1, 1);
-    }
+    let groups = SPEC.grid("main", [queries.len() as u32, 1]);
+    kernel::dispatch(&mut encoder, "firstshot.brdf_probe.pass", &pipeline, &[&bind_group], groups);
     ctx.queue.submit([encoder.finish()]);
     let out: Vec<[f32; 4]> = buffers::read_back(device, &ctx.queue, &results, 16 * queries.len() as u64)?;
     Ok(out.iter().map(|v| [v[0], v[1], v[2]]).collect())

@@ -1,8 +1,26 @@
 //! Bundle finalize (`wgsl/bundle_finalize.wgsl`): the fixed-point sums into J_j and win_j.
 
+use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
 use crate::gpu::kernel;
 use crate::layout::{GpuBundle, GpuPatch, GpuPatchState};
-use crate::stages::prefix_sum::dispatch_size;
+
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "bundle_finalize",
+    visibility: wgpu::ShaderStages::COMPUTE,
+    // One invocation per patch.
+    entry_points: &[compute("main", [64, 1, 1])],
+    groups: &[&[
+        uniform::<GpuBundle>("bundle"),
+        read::<GpuPatch>("patches"),
+        // 6 per patch (lo, hi per channel), cleared for the next step; one invocation per patch.
+        read_write::<u32>("sums"),
+        read::<u32>("max_bits"),
+        // w: s_j.
+        read::<[f32; 4]>("outgoing"),
+        // One writer per patch.
+        read_write::<GpuPatchState>("state"),
+    ]],
+};
 
 pub struct BundleFinalize {
     pipeline: wgpu::ComputePipeline,
@@ -11,31 +29,18 @@ pub struct BundleFinalize {
 }
 
 impl BundleFinalize {
-    /// `buffers`: bundle, patches, sums, max_bits, outgoing, state.
+    /// `buffers`: bundle, patches, sums, max_bits, outgoing, state (`SPEC`'s group 0).
     pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 6], patch_count: u32) -> Self {
-        let layout = kernel::buffer_layout(
-            device,
-            "firstshot.bundle_finalize.layout",
-            wgpu::ShaderStages::COMPUTE,
-            &[
-                (true, true, std::mem::size_of::<GpuBundle>() as u64),
-                (false, true, std::mem::size_of::<GpuPatch>() as u64),
-                (false, false, 4),
-                (false, true, 4),
-                (false, true, 16),
-                (false, false, std::mem::size_of::<GpuPatchState>() as u64),
-            ],
-        );
-        let module = kernel::module(device, "bundle_finalize");
+        let built = SPEC.build(device);
         BundleFinalize {
-            pipeline: kernel::compute_pipeline(device, &module, "bundle_finalize", "main", &[&layout]),
-            bind_group: kernel::buffer_bind_group(device, "firstshot.bundle_finalize.bind_group", &layout, &buffers),
+            pipeline: built.compute_pipeline(device, "main"),
+            bind_group: built.buffer_bind_group(device, 0, &buffers),
             patch_count,
         }
     }
 
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let groups = dispatch_size(self.patch_count.div_ceil(64));
+        let groups = SPEC.linear("main", self.patch_count);
         kernel::dispatch(encoder, "firstshot.bundle_finalize.pass", &self.pipeline, &[&self.bind_group], groups);
     }
 }

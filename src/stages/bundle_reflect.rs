@@ -1,10 +1,31 @@
 //! Bundle reflection (`wgsl/bundle_reflect.wgsl`): O_j of every patch into this step's
 //! bundle, and the step's largest radiance.
 
+use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
 use crate::gpu::kernel;
-use crate::gpu::scene_buffers::{FirstShotTable, SceneBuffers};
+use crate::gpu::scene_buffers::{FIRST_SHOT_TABLE_GROUP, SceneBuffers};
 use crate::layout::{GpuBundle, GpuMaterial, GpuPatch, GpuPatchState};
-use crate::stages::prefix_sum::dispatch_size;
+
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "bundle_reflect",
+    visibility: wgpu::ShaderStages::COMPUTE,
+    // One invocation per patch.
+    entry_points: &[compute("main", [64, 1, 1])],
+    groups: &[
+        &[
+            uniform::<GpuBundle>("bundle"),
+            read::<GpuPatch>("patches"),
+            read::<GpuMaterial>("materials"),
+            // J_j, win_j of the previous step.
+            read::<GpuPatchState>("state"),
+            // rgb O_j, w s_j; one writer per patch.
+            read_write::<[f32; 4]>("outgoing"),
+            // Bits of the largest O channel (positive floats order like their bits).
+            read_write::<u32>("max_bits"),
+        ],
+        FIRST_SHOT_TABLE_GROUP,
+    ],
+};
 
 pub struct BundleReflect {
     pipeline: wgpu::ComputePipeline,
@@ -21,37 +42,28 @@ impl BundleReflect {
         outgoing: &wgpu::Buffer,
         max_bits: &wgpu::Buffer,
     ) -> Self {
-        let size = |n: usize| n as u64;
-        let layout = kernel::buffer_layout(
-            device,
-            "firstshot.bundle_reflect.layout",
-            wgpu::ShaderStages::COMPUTE,
-            &[
-                (true, true, size(std::mem::size_of::<GpuBundle>())),
-                (false, true, size(std::mem::size_of::<GpuPatch>())),
-                (false, true, size(std::mem::size_of::<GpuMaterial>())),
-                (false, true, size(std::mem::size_of::<GpuPatchState>())),
-                (false, false, 16),
-                (false, false, 4),
-            ],
-        );
-        let table_layout = FirstShotTable::layout(device);
-        let module = kernel::module(device, "bundle_reflect");
+        let built = SPEC.build(device);
         BundleReflect {
-            pipeline: kernel::compute_pipeline(device, &module, "bundle_reflect", "main", &[&layout, &table_layout]),
-            bind_group: kernel::buffer_bind_group(
+            pipeline: built.compute_pipeline(device, "main"),
+            bind_group: built.bind_group(
                 device,
-                "firstshot.bundle_reflect.bind_group",
-                &layout,
-                &[bundle, &scene.patches, &scene.materials, &scene.state, outgoing, max_bits],
+                0,
+                &[
+                    ("bundle", bundle.into()),
+                    ("patches", (&scene.patches).into()),
+                    ("materials", (&scene.materials).into()),
+                    ("state", (&scene.state).into()),
+                    ("outgoing", outgoing.into()),
+                    ("max_bits", max_bits.into()),
+                ],
             ),
-            table_group: scene.first_shot.bind_group(device, &table_layout, &scene.samples),
+            table_group: scene.first_shot.bind_group(device, &built.layouts[1], &scene.samples),
             patch_count: scene.patch_count,
         }
     }
 
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let groups = dispatch_size(self.patch_count.div_ceil(64));
+        let groups = SPEC.linear("main", self.patch_count);
         let bind_groups = [&self.bind_group, &self.table_group];
         kernel::dispatch(encoder, "firstshot.bundle_reflect.pass", &self.pipeline, &bind_groups, groups);
     }

@@ -1,9 +1,30 @@
 //! Bundle transfer (`wgsl/bundle_transfer.wgsl`): sorts every line's surfaces and adds the
 //! radiance each patch receives to its fixed-point sums.
 
+use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
 use crate::gpu::kernel;
 use crate::layout::GpuBundle;
-use crate::stages::prefix_sum::dispatch_size;
+
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "bundle_transfer",
+    visibility: wgpu::ShaderStages::COMPUTE,
+    // One invocation per line.
+    entry_points: &[compute("main", [64, 1, 1])],
+    groups: &[&[
+        uniform::<GpuBundle>("bundle"),
+        // Line starts, resolution^2 + 1.
+        read::<u32>("offsets"),
+        // (depth bits, patch | FRAGMENT_FRONT_BIT); each line's slice sorted in place by its
+        // invocation.
+        read_write::<[u32; 2]>("fragments"),
+        // O_j from bundle_reflect.
+        read::<[f32; 4]>("outgoing"),
+        // 6 per patch: lo, hi per channel.
+        read_write::<u32>("sums"),
+        // Largest radiance of the step.
+        read::<u32>("max_bits"),
+    ]],
+};
 
 pub struct BundleTransfer {
     pipeline: wgpu::ComputePipeline,
@@ -12,31 +33,18 @@ pub struct BundleTransfer {
 }
 
 impl BundleTransfer {
-    /// `buffers`: bundle, offsets, fragments, outgoing, sums, max_bits.
+    /// `buffers`: bundle, offsets, fragments, outgoing, sums, max_bits (`SPEC`'s group 0).
     pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 6], lines: u32) -> Self {
-        let layout = kernel::buffer_layout(
-            device,
-            "firstshot.bundle_transfer.layout",
-            wgpu::ShaderStages::COMPUTE,
-            &[
-                (true, true, std::mem::size_of::<GpuBundle>() as u64),
-                (false, true, 4),
-                (false, false, 8),
-                (false, true, 16),
-                (false, false, 4),
-                (false, true, 4),
-            ],
-        );
-        let module = kernel::module(device, "bundle_transfer");
+        let built = SPEC.build(device);
         BundleTransfer {
-            pipeline: kernel::compute_pipeline(device, &module, "bundle_transfer", "main", &[&layout]),
-            bind_group: kernel::buffer_bind_group(device, "firstshot.bundle_transfer.bind_group", &layout, &buffers),
+            pipeline: built.compute_pipeline(device, "main"),
+            bind_group: built.buffer_bind_group(device, 0, &buffers),
             lines,
         }
     }
 
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let groups = dispatch_size(self.lines.div_ceil(64));
+        let groups = SPEC.linear("main", self.lines);
         kernel::dispatch(encoder, "firstshot.bundle_transfer.pass", &self.pipeline, &[&self.bind_group], groups);
     }
 }

@@ -1,9 +1,32 @@
 //! Bundle visibility (`wgsl/bundle_visibility.wgsl`): every surface on every line of the
 //! bundle's grid, by a counting pass, a prefix sum and a filling pass.
 
-use crate::gpu::kernel;
+use crate::gpu::bindings::{KernelSpec, fragment, read, read_write, uniform, vertex};
 use crate::layout::GpuBundle;
 use crate::stages::camera_item_buffer::raster_vertex_layout;
+
+/// Render pass, no culling, no depth test, a depth-only attachment that nothing reads;
+/// vertex input `RasterVertex`.
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "bundle_visibility",
+    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+    entry_points: &[vertex("vs_main"), fragment("fs_count"), fragment("fs_fill")],
+    groups: &[&[
+        uniform::<GpuBundle>("bundle"),
+        // resolution^2 + 1; fs_count.
+        read_write::<u32>("counts"),
+        // Exclusive prefix sums of counts; fs_fill.
+        read::<u32>("offsets"),
+        // resolution^2; fs_fill.
+        read_write::<u32>("cursor"),
+        // (bits of depth, patch | FRAGMENT_FRONT_BIT when the patch's front faces +d); fs_fill.
+        read_write::<[u32; 2]>("fragments"),
+        // Set when a slot lies past the capacity: the host grows the list and redoes the steps.
+        read_write::<u32>("overflow"),
+        // w: s_j from bundle_reflect; fs_fill.
+        read::<[f32; 4]>("outgoing"),
+    ]],
+};
 
 pub struct BundleVisibility {
     count: wgpu::RenderPipeline,
@@ -13,35 +36,16 @@ pub struct BundleVisibility {
 }
 
 impl BundleVisibility {
-    /// `buffers`: bundle, counts, offsets, cursor, fragments, overflow, outgoing.
+    /// `buffers`: bundle, counts, offsets, cursor, fragments, overflow, outgoing (`SPEC`'s
+    /// group 0).
     pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 7], resolution: u32) -> Self {
-        let stages = wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT;
-        let layout = kernel::buffer_layout(
-            device,
-            "firstshot.bundle_visibility.layout",
-            stages,
-            &[
-                (true, true, std::mem::size_of::<GpuBundle>() as u64),
-                (false, false, 4),
-                (false, true, 4),
-                (false, false, 4),
-                (false, false, 8),
-                (false, false, 4),
-                (false, true, 16),
-            ],
-        );
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("firstshot.bundle_visibility.pipeline_layout"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let module = kernel::module(device, "bundle_visibility");
+        let built = SPEC.build(device);
         let pipeline = |entry: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(&format!("firstshot.bundle_visibility.{entry}")),
-                layout: Some(&pipeline_layout),
+                layout: Some(&built.pipeline_layout),
                 vertex: wgpu::VertexState {
-                    module: &module,
+                    module: &built.module,
                     entry_point: Some("vs_main"),
                     compilation_options: Default::default(),
                     buffers: &[Some(raster_vertex_layout())],
@@ -57,7 +61,7 @@ impl BundleVisibility {
                 }),
                 multisample: Default::default(),
                 fragment: Some(wgpu::FragmentState {
-                    module: &module,
+                    module: &built.module,
                     entry_point: Some(entry),
                     compilation_options: Default::default(),
                     targets: &[],
@@ -79,7 +83,7 @@ impl BundleVisibility {
         BundleVisibility {
             count: pipeline("fs_count"),
             fill: pipeline("fs_fill"),
-            bind_group: kernel::buffer_bind_group(device, "firstshot.bundle_visibility.bind_group", &layout, &buffers),
+            bind_group: built.buffer_bind_group(device, 0, &buffers),
             depth_view: depth.create_view(&Default::default()),
         }
     }

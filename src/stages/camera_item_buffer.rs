@@ -1,9 +1,18 @@
 //! Camera item buffer (`wgsl/camera_item_buffer.wgsl`): patch id + 1 per camera pixel.
 
-use crate::gpu::{buffers, kernel};
+use crate::gpu::bindings::{KernelSpec, fragment, uniform, vertex};
+use crate::gpu::buffers;
 use crate::layout::{GpuCamera, RasterVertex};
 use crate::scene::Camera;
 use glam::DVec3;
+
+/// Render pass: vertex input `RasterVertex`, an R32Uint target of patch index + 1.
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "camera_item_buffer",
+    visibility: wgpu::ShaderStages::VERTEX,
+    entry_points: &[vertex("vs_main"), fragment("fs_main")],
+    groups: &[&[uniform::<GpuCamera>("camera")]],
+};
 
 pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -73,21 +82,12 @@ pub struct CameraItemBuffer {
 
 impl CameraItemBuffer {
     pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
-        let module = kernel::module(device, "camera_item_buffer");
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("firstshot.camera_item_buffer.layout"),
-            entries: &[buffers::uniform_entry::<GpuCamera>(0, wgpu::ShaderStages::VERTEX)],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("firstshot.camera_item_buffer.pipeline_layout"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
+        let built = SPEC.build(device);
         let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("firstshot.camera_item_buffer.pipeline"),
-            layout: Some(&pipeline_layout),
+            layout: Some(&built.pipeline_layout),
             vertex: wgpu::VertexState {
-                module: &module,
+                module: &built.module,
                 entry_point: Some("vs_main"),
                 compilation_options: Default::default(),
                 buffers: &[Some(raster_vertex_layout())],
@@ -107,7 +107,7 @@ impl CameraItemBuffer {
             }),
             multisample: Default::default(),
             fragment: Some(wgpu::FragmentState {
-                module: &module,
+                module: &built.module,
                 entry_point: Some("fs_main"),
                 compilation_options: Default::default(),
                 targets: &[Some(wgpu::ColorTargetState {
@@ -124,11 +124,7 @@ impl CameraItemBuffer {
             "firstshot.camera_item_buffer.camera",
             &<GpuCamera as bytemuck::Zeroable>::zeroed(),
         );
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("firstshot.camera_item_buffer.bind_group"),
-            layout: &layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: camera.as_entire_binding() }],
-        });
+        let bind_group = built.bind_group(device, 0, &[("camera", (&camera).into())]);
         let size = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
         let ids = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("firstshot.camera_item_buffer.ids"),

@@ -1,11 +1,41 @@
 //! First-shot reduction (`wgsl/first_shot_reduce.wgsl`): face pixels -> per-patch sums ->
 //! appended (patch, sample, r_ij) pairs.
 
+use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uint_texture, uniform};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{buffers, kernel};
 use crate::layout::{GpuAppendParams, GpuCamera, GpuFaceParams, GpuLightSample, GpuPatch};
 use crate::stages::camera_item_buffer::CameraItemBuffer;
-use crate::stages::prefix_sum::dispatch_size;
+
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "first_shot_reduce",
+    visibility: wgpu::ShaderStages::COMPUTE,
+    entry_points: &[
+        // One invocation per face pixel.
+        compute("reduce_face", [8, 8, 1]),
+        // One invocation per patch.
+        compute("append_sample", [64, 1, 1]),
+    ],
+    groups: &[&[
+        // reduce_face: the face's view.
+        uniform::<GpuCamera>("face"),
+        uniform::<GpuFaceParams>("params"),
+        // reduce_face: the face's item buffer.
+        uint_texture("item_buffer"),
+        read::<GpuPatch>("patches"),
+        read::<GpuLightSample>("samples"),
+        // lo, hi per patch.
+        read_write::<[u32; 2]>("sums"),
+        // append_sample.
+        uniform::<GpuAppendParams>("append"),
+        // Pairs per patch; one writer per patch.
+        read_write::<u32>("row_counts"),
+        // (patch, sample, bits of r_ij, 0).
+        read_write::<[u32; 4]>("pairs"),
+        // May exceed the capacity: then the host grows the list and runs the first shot again.
+        read_write::<u32>("pair_count"),
+    ]],
+};
 
 /// Pipelines, parameters and the pair list of the first shot.
 pub struct FirstShotReduce {
@@ -28,25 +58,7 @@ pub struct FirstShotReduce {
 
 impl FirstShotReduce {
     pub fn new(device: &wgpu::Device, scene: &SceneBuffers, faces: &CameraItemBuffer, capacity: u32) -> Self {
-        use buffers::storage_entry as storage;
-        let compute = wgpu::ShaderStages::COMPUTE;
-        let module = kernel::module(device, "first_shot_reduce");
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("firstshot.first_shot_reduce.layout"),
-            entries: &[
-                buffers::uniform_entry::<GpuCamera>(0, compute),
-                buffers::uniform_entry::<GpuFaceParams>(1, compute),
-                kernel::uint_texture_entry(2),
-                storage(3, true, std::mem::size_of::<GpuPatch>() as u64),
-                storage(4, true, std::mem::size_of::<GpuLightSample>() as u64),
-                storage(5, false, 8),
-                buffers::uniform_entry::<GpuAppendParams>(6, compute),
-                storage(7, false, 4),
-                storage(8, false, 16),
-                storage(9, false, 4),
-            ],
-        });
-        let pipeline = |entry: &str| kernel::compute_pipeline(device, &module, "first_shot_reduce", entry, &[&layout]);
+        let built = SPEC.build(device);
         let n = scene.patch_count as u64;
         let none = wgpu::BufferUsages::empty();
         let face_params = buffers::uniform(
@@ -65,25 +77,25 @@ impl FirstShotReduce {
             buffers::storage_zeroed(device, "firstshot.first_shot_reduce.pairs", 16 * capacity.max(1) as u64, none);
         let pair_count =
             buffers::storage_zeroed(device, "firstshot.first_shot_reduce.pair_count", 4, wgpu::BufferUsages::COPY_SRC);
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("firstshot.first_shot_reduce.bind_group"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: faces.camera.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: face_params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&faces.ids_view) },
-                wgpu::BindGroupEntry { binding: 3, resource: scene.patches.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: scene.samples.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: sums.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 6, resource: append_params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 7, resource: row_counts.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 8, resource: pairs.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 9, resource: pair_count.as_entire_binding() },
+        let bind_group = built.bind_group(
+            device,
+            0,
+            &[
+                ("face", (&faces.camera).into()),
+                ("params", (&face_params).into()),
+                ("item_buffer", (&faces.ids_view).into()),
+                ("patches", (&scene.patches).into()),
+                ("samples", (&scene.samples).into()),
+                ("sums", (&sums).into()),
+                ("append", (&append_params).into()),
+                ("row_counts", (&row_counts).into()),
+                ("pairs", (&pairs).into()),
+                ("pair_count", (&pair_count).into()),
             ],
-        });
+        );
         FirstShotReduce {
-            reduce: pipeline("reduce_face"),
-            append: pipeline("append_sample"),
+            reduce: built.compute_pipeline(device, "reduce_face"),
+            append: built.compute_pipeline(device, "append_sample"),
             bind_group,
             face_params,
             append_params,
@@ -99,13 +111,13 @@ impl FirstShotReduce {
 
     /// Adds the weights of the face just rendered (its uniform and `face_params` written).
     pub fn record_face(&self, encoder: &mut wgpu::CommandEncoder, rows: u32) {
-        let groups = (self.face_size[0].div_ceil(8), rows.div_ceil(8));
+        let groups = SPEC.grid("reduce_face", [self.face_size[0], rows]);
         kernel::dispatch(encoder, "firstshot.first_shot_reduce.reduce_face", &self.reduce, &[&self.bind_group], groups);
     }
 
     /// Appends the sample's pairs (its `append_params` written) and clears the sums.
     pub fn record_append(&self, encoder: &mut wgpu::CommandEncoder) {
-        let groups = dispatch_size(self.patch_count.div_ceil(64));
+        let groups = SPEC.linear("append_sample", self.patch_count);
         kernel::dispatch(
             encoder,
             "firstshot.first_shot_reduce.append_sample",

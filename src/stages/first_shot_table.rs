@@ -1,10 +1,37 @@
 //! First-shot table (`wgsl/first_shot_table.wgsl`): appended pairs -> rows by patch, each
 //! row in ascending sample order, and each row's irradiance sum for diffuse patches.
 
+use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
 use crate::gpu::scene_buffers::FirstShotTable;
 use crate::gpu::{buffers, kernel};
 use crate::layout::GpuLightSample;
-use crate::stages::prefix_sum::{PrefixSum, dispatch_size};
+use crate::stages::prefix_sum::PrefixSum;
+
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "first_shot_table",
+    visibility: wgpu::ShaderStages::COMPUTE,
+    entry_points: &[
+        // One invocation per pair.
+        compute("fill_rows", [64, 1, 1]),
+        // One per patch.
+        compute("sort_rows", [64, 1, 1]),
+        compute("row_irradiance", [64, 1, 1]),
+    ],
+    groups: &[&[
+        // x: pairs, y: patches.
+        uniform::<[u32; 4]>("params"),
+        read::<[u32; 4]>("pairs"),
+        // patches + 1 row starts.
+        read::<u32>("offsets"),
+        // Zeroed before fill_rows.
+        read_write::<u32>("cursor"),
+        // (sample, bits of r_ij).
+        read_write::<[u32; 2]>("entries"),
+        read::<GpuLightSample>("samples"),
+        // rgb sum_i S_i r_ij per patch.
+        read_write::<[f32; 4]>("irradiance"),
+    ]],
+};
 
 /// Records the build of the table from `pair_total` pairs, the row counts (patch_count + 1
 /// u32, the last 0) and the light samples, and returns it with the temporaries the
@@ -29,49 +56,25 @@ pub fn build(
     let scan = PrefixSum::new(device, patch_count + 1, row_counts, &offsets);
     scan.record(encoder);
 
-    let layout = kernel::buffer_layout(
+    let built = SPEC.build(device);
+    let bind_group = built.bind_group(
         device,
-        "firstshot.first_shot_table.layout",
-        wgpu::ShaderStages::COMPUTE,
+        0,
         &[
-            (true, true, 16),
-            (false, true, 16),
-            (false, true, 4),
-            (false, false, 4),
-            (false, false, 8),
-            (false, true, std::mem::size_of::<GpuLightSample>() as u64),
-            (false, false, 16),
+            ("params", (&params).into()),
+            ("pairs", pairs.into()),
+            ("offsets", (&offsets).into()),
+            ("cursor", (&cursor).into()),
+            ("entries", (&entries).into()),
+            ("samples", samples.into()),
+            ("irradiance", (&irradiance).into()),
         ],
     );
-    let bind_group = kernel::buffer_bind_group(
-        device,
-        "firstshot.first_shot_table.bind_group",
-        &layout,
-        &[&params, pairs, &offsets, &cursor, &entries, samples, &irradiance],
-    );
-    let module = kernel::module(device, "first_shot_table");
-    let pipeline = |entry: &str| kernel::compute_pipeline(device, &module, "first_shot_table", entry, &[&layout]);
-    let per_patch = dispatch_size(patch_count.div_ceil(64));
-    kernel::dispatch(
-        encoder,
-        "firstshot.first_shot_table.fill_rows",
-        &pipeline("fill_rows"),
-        &[&bind_group],
-        dispatch_size(pair_total.div_ceil(64)),
-    );
-    kernel::dispatch(
-        encoder,
-        "firstshot.first_shot_table.sort_rows",
-        &pipeline("sort_rows"),
-        &[&bind_group],
-        per_patch,
-    );
-    kernel::dispatch(
-        encoder,
-        "firstshot.first_shot_table.row_irradiance",
-        &pipeline("row_irradiance"),
-        &[&bind_group],
-        per_patch,
-    );
+    for (entry, invocations) in [("fill_rows", pair_total), ("sort_rows", patch_count), ("row_irradiance", patch_count)]
+    {
+        let pipeline = built.compute_pipeline(device, entry);
+        let groups = SPEC.linear(entry, invocations);
+        kernel::dispatch(encoder, &format!("firstshot.first_shot_table.{entry}"), &pipeline, &[&bind_group], groups);
+    }
     (FirstShotTable { offsets, entries, irradiance, entry_count: pair_total }, vec![cursor, params], scan)
 }

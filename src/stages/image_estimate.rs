@@ -3,32 +3,63 @@
 //! the running sum of the image.
 
 use crate::direct_light::DirectLights;
+use crate::gpu::bindings::{Kernel, KernelSpec, compute, read, read_write, uint_texture, uniform};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{buffers, kernel};
 use crate::iteration::GatherBuffers;
-use crate::layout::{
-    GpuBundle, GpuCamera, GpuDirectLight, GpuEstimateParams, GpuMaterial, GpuPatch, GpuWindowFace,
-};
+use crate::layout::{GpuBundle, GpuCamera, GpuDirectLight, GpuEstimateParams, GpuMaterial, GpuPatch, GpuWindowFace};
 use crate::stages::camera_item_buffer::CameraItemBuffer;
 use crate::{Error, Result};
 
-const WORKGROUP: u32 = 8;
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "image_estimate",
+    visibility: wgpu::ShaderStages::COMPUTE,
+    // One invocation per pixel.
+    entry_points: &[compute("main", [8, 8, 1])],
+    groups: &[
+        &[
+            uniform::<GpuCamera>("camera"),
+            uniform::<GpuEstimateParams>("params"),
+            // Patch index + 1 per pixel.
+            uint_texture("item_buffer"),
+            read::<GpuPatch>("patches"),
+            read::<GpuMaterial>("materials"),
+            // One pixel per invocation: no race.
+            read_write::<[f32; 4]>("image_sum"),
+        ],
+        // The direct light (`direct_light::DirectLights`).
+        &[
+            read::<GpuDirectLight>("lights"),
+            read::<GpuWindowFace>("faces"),
+            // Faces with tile.w == 0: the point lights' kept cubes.
+            uint_texture("kept_atlas"),
+            // Faces with tile.w == 1: the area lights' windows of this pass.
+            uint_texture("pass_atlas"),
+        ],
+        // The gather (`iteration::GatherBuffers`), after the step's transfer sorted its lines.
+        &[
+            uniform::<GpuBundle>("bundle"),
+            // Line starts, resolution^2 + 1.
+            read::<u32>("offsets"),
+            // (depth bits, patch | FRAGMENT_FRONT_BIT), each line sorted by depth.
+            read::<[u32; 2]>("fragments"),
+            // O_j of this step.
+            read::<[f32; 4]>("outgoing"),
+        ],
+    ],
+};
 
 /// Pipeline, parameters and the image sum (vec4<f32> per pixel: rgb sum, w count).
 pub struct ImageEstimate {
+    built: Kernel,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     direct_group: wgpu::BindGroup,
-    gather_layout: wgpu::BindGroupLayout,
     gather_group: wgpu::BindGroup,
     pub params: wgpu::Buffer,
     pub image_sum: wgpu::Buffer,
     width: u32,
     height: u32,
-}
-
-fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    kernel::uint_texture_entry(binding)
 }
 
 impl ImageEstimate {
@@ -40,45 +71,8 @@ impl ImageEstimate {
         direct: &DirectLights,
         gather: Option<&GatherBuffers>,
     ) -> Self {
-        use buffers::storage_entry as storage;
-        let module = kernel::module(device, "image_estimate");
-        let compute = wgpu::ShaderStages::COMPUTE;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("firstshot.image_estimate.layout"),
-            entries: &[
-                buffers::uniform_entry::<GpuCamera>(0, compute),
-                buffers::uniform_entry::<GpuEstimateParams>(1, compute),
-                texture_entry(2),
-                storage(3, true, std::mem::size_of::<GpuPatch>() as u64),
-                storage(4, true, std::mem::size_of::<GpuMaterial>() as u64),
-                storage(5, false, 16),
-            ],
-        });
-        let direct_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("firstshot.image_estimate.direct_layout"),
-            entries: &[
-                storage(0, true, std::mem::size_of::<GpuDirectLight>() as u64),
-                storage(1, true, std::mem::size_of::<GpuWindowFace>() as u64),
-                texture_entry(2),
-                texture_entry(3),
-            ],
-        });
-        let gather_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("firstshot.image_estimate.gather_layout"),
-            entries: &[
-                buffers::uniform_entry::<GpuBundle>(0, compute),
-                storage(1, true, 4),
-                storage(2, true, 8),
-                storage(3, true, 16),
-            ],
-        });
-        let pipeline = kernel::compute_pipeline(
-            device,
-            &module,
-            "image_estimate",
-            "main",
-            &[&layout, &direct_layout, &gather_layout],
-        );
+        let built = SPEC.build(device);
+        let pipeline = built.compute_pipeline(device, "main");
         let params = buffers::uniform(
             device,
             "firstshot.image_estimate.params",
@@ -91,41 +85,35 @@ impl ImageEstimate {
             pixels * 16,
             wgpu::BufferUsages::COPY_SRC,
         );
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("firstshot.image_estimate.bind_group"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: camera.camera.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&camera.ids_view) },
-                wgpu::BindGroupEntry { binding: 3, resource: scene.patches.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: scene.materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: image_sum.as_entire_binding() },
+        let bind_group = built.bind_group(
+            device,
+            0,
+            &[
+                ("camera", (&camera.camera).into()),
+                ("params", (&params).into()),
+                ("item_buffer", (&camera.ids_view).into()),
+                ("patches", (&scene.patches).into()),
+                ("materials", (&scene.materials).into()),
+                ("image_sum", (&image_sum).into()),
             ],
-        });
-        let direct_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("firstshot.image_estimate.direct_group"),
-            layout: &direct_layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: direct.lights_buffer().as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: direct.faces_buffer().as_entire_binding() },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(direct.kept_atlas()),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(direct.pass_atlas()),
-                },
+        );
+        let direct_group = built.bind_group(
+            device,
+            1,
+            &[
+                ("lights", direct.lights_buffer().into()),
+                ("faces", direct.faces_buffer().into()),
+                ("kept_atlas", direct.kept_atlas().into()),
+                ("pass_atlas", direct.pass_atlas().into()),
             ],
-        });
-        let gather_group = Self::gather_group(device, &gather_layout, gather);
+        );
+        let gather_group = Self::gather_group(device, &built, gather);
         ImageEstimate {
+            built,
             pipeline,
             bind_group,
             direct_group,
             gather_group,
-            gather_layout,
             params,
             image_sum,
             width: camera.width,
@@ -134,11 +122,7 @@ impl ImageEstimate {
     }
 
     /// Group 2; without an iteration, placeholders that a pass with `gather` 0 never reads.
-    fn gather_group(
-        device: &wgpu::Device,
-        layout: &wgpu::BindGroupLayout,
-        gather: Option<&GatherBuffers>,
-    ) -> wgpu::BindGroup {
+    fn gather_group(device: &wgpu::Device, built: &Kernel, gather: Option<&GatherBuffers>) -> wgpu::BindGroup {
         let placeholder;
         let (bundle, offsets, fragments, outgoing) = match gather {
             Some(g) => (&g.bundle, &g.offsets, &g.fragments, &g.outgoing),
@@ -157,22 +141,26 @@ impl ImageEstimate {
                 (&placeholder[0], &placeholder[1], &placeholder[2], &placeholder[3])
             }
         };
-        kernel::buffer_bind_group(
+        built.bind_group(
             device,
-            "firstshot.image_estimate.gather_group",
-            layout,
-            &[bundle, offsets, fragments, outgoing],
+            2,
+            &[
+                ("bundle", bundle.into()),
+                ("offsets", offsets.into()),
+                ("fragments", fragments.into()),
+                ("outgoing", outgoing.into()),
+            ],
         )
     }
 
     /// Binds the bundle buffers of a new iteration (after its fragment list grew).
     pub fn rebind_gather(&mut self, device: &wgpu::Device, gather: &GatherBuffers) {
-        self.gather_group = Self::gather_group(device, &self.gather_layout, Some(gather));
+        self.gather_group = Self::gather_group(device, &self.built, Some(gather));
     }
 
     /// Records one estimate of every pixel (reads the camera item buffer of this pass).
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let groups = (self.width.div_ceil(WORKGROUP), self.height.div_ceil(WORKGROUP));
+        let groups = SPEC.grid("main", [self.width, self.height]);
         let bind_groups = [&self.bind_group, &self.direct_group, &self.gather_group];
         kernel::dispatch(encoder, "firstshot.image_estimate.pass", &self.pipeline, &bind_groups, groups);
     }

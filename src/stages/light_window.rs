@@ -1,9 +1,18 @@
 //! Light windows (`wgsl/light_window.wgsl`): item buffers of the lights' window faces, each
 //! face a tile of one atlas texture, for the per-pixel direct light.
 
-use crate::gpu::kernel;
+use crate::gpu::bindings::{KernelSpec, fragment, read, vertex};
 use crate::layout::GpuWindowFace;
 use crate::stages::camera_item_buffer::{DEPTH_FORMAT, ID_FORMAT, raster_vertex_layout};
+
+/// Render pass: vertex input `RasterVertex`, an R32Uint target of patch index + 1; the
+/// instance index picks the face.
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "light_window",
+    visibility: wgpu::ShaderStages::VERTEX,
+    entry_points: &[vertex("vs_main"), fragment("fs_main")],
+    groups: &[&[read::<GpuWindowFace>("faces")]],
+};
 
 /// Pipeline and targets of one atlas of window faces.
 pub struct WindowAtlas {
@@ -17,23 +26,13 @@ pub struct WindowAtlas {
 impl WindowAtlas {
     /// An atlas of `size` texels whose faces are entries of `faces` (array<WindowFace>).
     pub fn new(device: &wgpu::Device, label: &str, faces: &wgpu::Buffer, size: [u32; 2]) -> Self {
-        let module = kernel::module(device, "light_window");
-        let layout = kernel::buffer_layout(
-            device,
-            "firstshot.light_window.layout",
-            wgpu::ShaderStages::VERTEX,
-            &[(false, true, std::mem::size_of::<GpuWindowFace>() as u64)],
-        );
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("firstshot.light_window.pipeline_layout"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
+        let built = SPEC.build(device);
+        let module = &built.module;
         let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("firstshot.light_window.pipeline"),
-            layout: Some(&pipeline_layout),
+            layout: Some(&built.pipeline_layout),
             vertex: wgpu::VertexState {
-                module: &module,
+                module,
                 entry_point: Some("vs_main"),
                 compilation_options: Default::default(),
                 buffers: &[Some(raster_vertex_layout())],
@@ -48,7 +47,7 @@ impl WindowAtlas {
             }),
             multisample: Default::default(),
             fragment: Some(wgpu::FragmentState {
-                module: &module,
+                module,
                 entry_point: Some("fs_main"),
                 compilation_options: Default::default(),
                 targets: &[Some(wgpu::ColorTargetState {
@@ -60,7 +59,7 @@ impl WindowAtlas {
             multiview_mask: None,
             cache: None,
         });
-        let bind_group = kernel::buffer_bind_group(device, "firstshot.light_window.bind_group", &layout, &[faces]);
+        let bind_group = built.bind_group(device, 0, &[("faces", faces.into())]);
         let texture = |format, usage, what: &str| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(&format!("firstshot.light_window.{label}.{what}")),
@@ -73,7 +72,8 @@ impl WindowAtlas {
                 view_formats: &[],
             })
         };
-        let ids = texture(ID_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING, "ids");
+        let ids =
+            texture(ID_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING, "ids");
         let depth = texture(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT, "depth");
         WindowAtlas {
             pipeline,

@@ -1,16 +1,32 @@
 //! Exclusive prefix sum of u32 counts (`wgsl/prefix_sum.wgsl`), in as many levels as the
 //! length needs (`BLOCK` values per block and level).
 
-use crate::gpu::{buffers, kernel};
+use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
+use crate::gpu::buffers;
+use crate::layout::{PREFIX_SUM_PER_THREAD, PREFIX_SUM_WORKGROUP};
 
 /// Values per workgroup and level (reaches WGSL through the generated header).
-pub const BLOCK: u32 = crate::layout::PREFIX_SUM_WORKGROUP * crate::layout::PREFIX_SUM_PER_THREAD;
+pub const BLOCK: u32 = PREFIX_SUM_WORKGROUP * PREFIX_SUM_PER_THREAD;
 
-/// Workgroup counts for `blocks` workgroups, folded into 2D past the 65535 limit.
-pub fn dispatch_size(blocks: u32) -> (u32, u32) {
-    const MAX: u32 = 65535;
-    if blocks <= MAX { (blocks.max(1), 1) } else { (MAX, blocks.div_ceil(MAX)) }
-}
+pub const SPEC: KernelSpec = KernelSpec {
+    stem: "prefix_sum",
+    visibility: wgpu::ShaderStages::COMPUTE,
+    // One workgroup per block of BLOCK values, PREFIX_SUM_PER_THREAD per invocation.
+    entry_points: &[
+        compute("scan_blocks", [PREFIX_SUM_WORKGROUP, 1, 1]),
+        compute("add_block_offsets", [PREFIX_SUM_WORKGROUP, 1, 1]),
+    ],
+    groups: &[&[
+        // x: n.
+        uniform::<[u32; 4]>("params"),
+        // n counts.
+        read::<u32>("values"),
+        // n exclusive prefix sums.
+        read_write::<u32>("scanned"),
+        // scan_blocks writes one per block; add_block_offsets reads the scanned ones.
+        read_write::<u32>("block_sums"),
+    ]],
+};
 
 struct Level {
     n: u32,
@@ -29,18 +45,9 @@ pub struct PrefixSum {
 impl PrefixSum {
     /// `values` (n u32) are scanned into `scanned` (n u32, may not alias `values`).
     pub fn new(device: &wgpu::Device, n: u32, values: &wgpu::Buffer, scanned: &wgpu::Buffer) -> Self {
-        let module = kernel::module(device, "prefix_sum");
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("firstshot.prefix_sum.layout"),
-            entries: &[
-                buffers::uniform_entry::<[u32; 4]>(0, wgpu::ShaderStages::COMPUTE),
-                buffers::storage_entry(1, true, 4),
-                buffers::storage_entry(2, false, 4),
-                buffers::storage_entry(3, false, 4),
-            ],
-        });
-        let pipeline = |entry: &str| kernel::compute_pipeline(device, &module, "prefix_sum", entry, &[&layout]);
-        let (scan_pipeline, add_pipeline) = (pipeline("scan_blocks"), pipeline("add_block_offsets"));
+        let built = SPEC.build(device);
+        let (scan_pipeline, add_pipeline) =
+            (built.compute_pipeline(device, "scan_blocks"), built.compute_pipeline(device, "add_block_offsets"));
         let mut owned = Vec::new();
         let mut levels = Vec::new();
         // Level k scans `input` into `output`; its block sums are level k+1's input.
@@ -63,16 +70,16 @@ impl PrefixSum {
             );
             let params = buffers::uniform(device, "firstshot.prefix_sum.params", &[len, 0, 0, 0]);
             let group = |a: &wgpu::Buffer, b: &wgpu::Buffer, c: &wgpu::Buffer| {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("firstshot.prefix_sum.bind_group"),
-                    layout: &layout,
-                    entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: a.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 2, resource: b.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 3, resource: c.as_entire_binding() },
+                built.bind_group(
+                    device,
+                    0,
+                    &[
+                        ("params", (&params).into()),
+                        ("values", a.into()),
+                        ("scanned", b.into()),
+                        ("block_sums", c.into()),
                     ],
-                })
+                )
             };
             let scan = group(&input, &output, &sums);
             let last = blocks == 1;
@@ -98,14 +105,14 @@ impl PrefixSum {
         });
         pass.set_pipeline(&self.scan_pipeline);
         for level in &self.levels {
-            let (x, y) = dispatch_size(level.n.div_ceil(BLOCK));
+            let (x, y) = SPEC.linear("scan_blocks", level.n.div_ceil(PREFIX_SUM_PER_THREAD));
             pass.set_bind_group(0, &level.scan, &[]);
             pass.dispatch_workgroups(x, y, 1);
         }
         pass.set_pipeline(&self.add_pipeline);
         for level in self.levels.iter().rev() {
             if let Some(add) = &level.add {
-                let (x, y) = dispatch_size(level.n.div_ceil(BLOCK));
+                let (x, y) = SPEC.linear("add_block_offsets", level.n.div_ceil(PREFIX_SUM_PER_THREAD));
                 pass.set_bind_group(0, add, &[]);
                 pass.dispatch_workgroups(x, y, 1);
             }

@@ -1,5 +1,10 @@
-//! Helpers shared by the integration tests.
+//! Helpers shared by the integration tests: the GPU, temporary folders (`scratch`), scene
+//! text (`scenes`), running the binary (`bin`), hand-made patches.
 #![allow(dead_code)]
+
+pub mod bin;
+pub mod scenes;
+pub mod scratch;
 
 use firstshot::gpu::{AdapterChoice, Context};
 use std::path::PathBuf;

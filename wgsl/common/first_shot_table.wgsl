@@ -1,5 +1,7 @@
 // The first-shot table (bind group 1) and the reflected first-shot radiance, for the
 // kernels that evaluate it (image_estimate, bundle_reflect). Built by src/first_shot.rs.
+// Bindings: `FIRST_SHOT_TABLE_GROUP` in src/gpu/scene_buffers.rs, group 1 of those kernels'
+// `SPEC`s (tests/kernel_bindings.rs holds them against this file).
 
 @group(1) @binding(0) var<storage, read> fs_offsets: array<u32>;       // row starts, patches + 1
 @group(1) @binding(1) var<storage, read> fs_entries: array<vec2<u32>>; // (sample, bits of r_ij)

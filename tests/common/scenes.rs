@@ -1,0 +1,46 @@
+//! Scene text for tests: the smallest scene that loads, edits of it, the shipped scenes.
+
+use std::path::PathBuf;
+
+/// The smallest scene that loads: one floor quad of one white material, lit by one point
+/// light.
+pub const MINIMAL: &str = r#"
+format = 1
+
+[camera]
+position = [0, 1, -5]
+look_at = [0, 1, 0]
+up = [0, 1, 0]
+fov_y = 40
+width = 64
+height = 48
+
+[materials.white]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+
+[[shapes]]
+type = "quad"
+vertices = [[-1, 0, -1], [-1, 0, 1], [1, 0, 1], [1, 0, -1]]
+material = "white"
+
+[[lights]]
+type = "point"
+position = [0, 3, 0]
+power = [10, 10, 10]
+"#;
+
+/// MINIMAL with each `(from, to)` replaced once (each `from` must occur).
+pub fn edited(edits: &[(&str, &str)]) -> String {
+    let mut text = MINIMAL.to_string();
+    for (from, to) in edits {
+        assert!(text.contains(from), "{from:?} is not in the scene");
+        text = text.replacen(from, to, 1);
+    }
+    text
+}
+
+/// `scenes/<name>.toml` of the checkout.
+pub fn shipped(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes").join(format!("{name}.toml"))
+}
