@@ -76,6 +76,8 @@ pub struct DirectLights {
     window: LightWindow,
     /// Pixels along a full face edge, after the memory budget.
     pub resolution: u32,
+    /// The pass whose points the tables hold.
+    prepared: Option<u64>,
     near: f64,
 }
 
@@ -223,6 +225,7 @@ impl DirectLights {
             per_pass,
             window,
             resolution: r,
+            prepared: None,
             near,
         };
         let kept_faces = out.faces_in(KEPT);
@@ -271,11 +274,13 @@ impl DirectLights {
     }
 
     /// Places pass `pass`'s point on every area light and writes the light and face tables
-    /// for it.
-    pub fn prepare_pass(&mut self, queue: &wgpu::Queue, pass: u64) {
-        if !self.has_area_lights() {
-            return;
+    /// for it, unless they already hold that pass. Returns whether the area lights' windows
+    /// must be rendered again (`record_pass`).
+    pub fn prepare_pass(&mut self, queue: &wgpu::Queue, pass: u64) -> bool {
+        if !self.has_area_lights() || self.prepared == Some(pass) {
+            return false;
         }
+        self.prepared = Some(pass);
         for (planned, entry) in self.lights.iter().zip(self.table.iter_mut()) {
             let Source::Area { radiance, normal, triangles } = &planned.source else { continue };
             let count = triangles.len() as u64;
@@ -294,6 +299,7 @@ impl DirectLights {
         }
         queue.write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&self.table));
         queue.write_buffer(&self.faces_buffer, 0, bytemuck::cast_slice(&self.faces));
+        true
     }
 
     /// Records the item buffers of this pass's area-light windows.

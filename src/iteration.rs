@@ -27,7 +27,8 @@ pub struct BundleScene {
 }
 
 /// The bundle of step `step` (the one place a `GpuBundle` is made): direction uniform on
-/// the sphere, grid rotated uniformly about it and shifted by a uniform sub-pixel offset;
+/// the sphere (stratified over blocks of steps, `rng::stratified_direction`), grid rotated
+/// uniformly about it and shifted by a uniform sub-pixel offset;
 /// the grid covers the bounding sphere. Returns the step's generator, advanced past the
 /// bundle's numbers, for the rest of the step's random choices.
 pub fn bundle_of_step(
@@ -38,7 +39,7 @@ pub fn bundle_of_step(
     capacity: u32,
 ) -> (GpuBundle, StepRng) {
     let mut rng = StepRng::new(seed, step);
-    let d = rng.direction();
+    let d = crate::rng::stratified_direction(seed, step);
     let angle = 2.0 * std::f64::consts::PI * rng.uniform();
     let t1 = d.any_orthonormal_vector();
     let t2 = d.cross(t1);

@@ -86,6 +86,10 @@ struct RenderArgs {
     /// (default: from the scene's albedo).
     #[arg(long, value_name = "N")]
     burn_in: Option<u32>,
+    /// Steps of the iteration that share one point on each area light and its windows
+    /// (default 4).
+    #[arg(long, value_name = "N")]
+    window_steps: Option<u32>,
     /// Image width in pixels.
     #[arg(long, value_name = "W")]
     width: Option<u32>,
@@ -367,6 +371,12 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
         options.direct_passes = v;
     }
     options.burn_in = args.burn_in.or(options.burn_in);
+    if let Some(v) = args.window_steps {
+        if v == 0 {
+            return Err(usage("--window-steps 0: expected at least 1 step".into()));
+        }
+        options.window_steps = v;
+    }
     Ok(options)
 }
 
