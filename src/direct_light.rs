@@ -19,6 +19,7 @@ use crate::first_shot::{self, LightWindow};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{Context, buffers};
 use crate::layout::{GpuDirectLight, GpuWindowFace, LIGHT_AREA, LIGHT_POINT};
+use crate::render::RenderOptions;
 use crate::rng::StepRng;
 use crate::scene::{Light, LightSample, PatchKind, Patches, Rgb, SampleKind, Scene};
 use crate::stages::light_window::WindowAtlas;
@@ -113,19 +114,18 @@ fn window_sample(source: &Source, position: DVec3) -> LightSample {
 }
 
 impl DirectLights {
-    /// The lights of `scene` that are first shot (none without `first_shot`), their windows
-    /// at `resolution` pixels per face edge (less if the budget or the device needs it),
-    /// and the point lights' kept faces rendered.
+    /// The lights of `scene` that are first shot (none without `options.first_shot`), their
+    /// windows (`options.light_window`) at `options.shadow_resolution` pixels per face edge
+    /// (less if the budget or the device needs it), and the point lights' kept faces rendered.
     pub fn new(
         ctx: &Context,
         scene: &Scene,
         patches: &Patches,
         buffers: &SceneBuffers,
-        first_shot: bool,
-        window: LightWindow,
-        resolution: u32,
-        seed: u64,
+        options: &RenderOptions,
     ) -> Self {
+        let (first_shot, window, resolution, seed) =
+            (options.first_shot, options.light_window, options.shadow_resolution, options.seed);
         let mut sources = Vec::new();
         for (l, light) in scene.lights.iter().enumerate().filter(|_| first_shot) {
             match *light {

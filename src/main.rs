@@ -76,19 +76,19 @@ struct RenderArgs {
     light_window: Option<LightWindow>,
     /// Pixels along a full face edge of the lights' windows for the per-pixel direct light
     /// (default: the hemicube resolution).
-    #[arg(long, value_name = "R")]
+    #[arg(long, allow_negative_numbers = true, value_name = "R")]
     shadow_resolution: Option<u32>,
     /// Passes of a direct-light image (--iterations 0), each a new camera sample per pixel
     /// and new points on the area lights.
-    #[arg(long, value_name = "N")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
     direct_passes: Option<u32>,
     /// Steps that advance the iteration state before any is averaged into the image
     /// (default: from the scene's albedo).
-    #[arg(long, value_name = "N")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
     burn_in: Option<u32>,
     /// Steps of the iteration that share one point on each area light and its windows
     /// (default 4).
-    #[arg(long, value_name = "N")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
     window_steps: Option<u32>,
     /// Image width in pixels.
     #[arg(long, value_name = "W")]

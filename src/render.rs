@@ -342,16 +342,7 @@ impl<'a> Renderer<'a> {
             hooks.phase("first shot", stats.ms);
             Some(stats)
         };
-        let direct = DirectLights::new(
-            ctx,
-            scene,
-            patches,
-            &buffers,
-            options.first_shot,
-            options.light_window,
-            options.shadow_resolution,
-            options.seed,
-        );
+        let direct = DirectLights::new(ctx, scene, patches, &buffers, options);
         let iteration = if options.iterations == 0 {
             None
         } else {

@@ -82,12 +82,12 @@ mod tests {
         // Even: within one block every octant holds its share to within a few points (a
         // random set of 256 would stray by ~sqrt(32) = 6 points per octant).
         for block in 0..4 {
-            let mut octants = [0; 8];
+            let mut octants = [0i32; 8];
             for k in 0..DIRECTION_BLOCK {
                 let v = stratified_direction(9, block * DIRECTION_BLOCK + k);
                 octants[(v.x > 0.0) as usize + 2 * (v.y > 0.0) as usize + 4 * (v.z > 0.0) as usize] += 1;
             }
-            assert!(octants.iter().all(|&c| (c as i32 - 32).abs() <= 4), "block {block}: {octants:?}");
+            assert!(octants.iter().all(|&c| (c - 32).abs() <= 4), "block {block}: {octants:?}");
         }
         // Another seed, other directions.
         assert_ne!(stratified_direction(5, 3), stratified_direction(6, 3));

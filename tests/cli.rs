@@ -110,6 +110,10 @@ fn test02_usage_errors_exit_2_and_write_nothing() {
         (vec!["--time", "0"], "--time"),
         (vec!["--time", "-3"], "--time"),
         (vec!["--light-window", "cube"], "--light-window"),
+        (vec!["--shadow-resolution", "0"], "--shadow-resolution"),
+        (vec!["--direct-passes", "0"], "--direct-passes 0"),
+        (vec!["--window-steps", "0"], "--window-steps 0"),
+        (vec!["--burn-in", "-1"], "--burn-in"),
     ] {
         let err = refused_render(&scratch, &[&[cb.as_str()], &args[..]].concat(), "x.exr");
         assert!(err.contains(part), "{args:?}: stderr lacks {part:?}: {err}");

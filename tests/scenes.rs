@@ -50,8 +50,9 @@ fn test01_cornell_direct_light_matches_the_reference() {
         }
     }
     assert!(light_pixels > 100, "the reference should show the light, found {light_pixels} pixels");
-    // DESIGN.md / issue: mean brightness within 2% per channel. Measured: +0.4 to +0.6%.
-    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.02) && e.relative_rmse < 0.08;
+    // Per-pixel direct light, 64 passes: measured RMSE 0.84%, means within 0.13%. Bounds:
+    // the per-pixel image issue's 2% RMSE, and 1% per channel mean.
+    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.01) && e.relative_rmse < 0.02;
     if !ok {
         save_on_failure("cornell_direct", &image, &reference);
     }
@@ -63,9 +64,10 @@ fn test02_cornell_full_global_illumination_matches_the_reference() {
     let Some((image, reference)) = cornell(1000) else { return };
     let e = image_error(&image, &reference).unwrap();
     eprintln!("cornell full, 1000 steps: {e:?}");
-    // Mean within 2% per channel (measured: -0.6%, -1.3%, -0.7%; the running mean starts
-    // from J = 0, a bias falling as 1/steps), RMSE 5.5% at patch size 40.
-    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.02) && e.relative_rmse < 0.08;
+    // Per-pixel image, seed 1: measured RMSE 3.15%, means -1.9%, -1.2%, -1.1% (the rest is
+    // the noise of one bundle direction per step, which the whole image shares). Bounds:
+    // 3.5% RMSE (the per-patch image stopped at 5.5%) and 2% per channel mean.
+    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.02) && e.relative_rmse < 0.035;
     if !ok {
         save_on_failure("cornell_full", &image, &reference);
     }
@@ -91,4 +93,25 @@ fn test03_with_and_without_first_shot_converge_to_the_same_image() {
     let (early, late) = (difference(25), difference(400));
     eprintln!("with vs without first shot: relative difference {early:.4} after 25 steps, {late:.4} after 400");
     assert!(late < early / 2.0, "the difference must fall as steps grow: {early} then {late}");
+}
+
+#[test]
+fn test04_cornell_point_direct_light_has_straight_shadows() {
+    let Some(ctx) = common::gpu() else { return };
+    let refs = common::refs_dir();
+    let scene = scene::load(&refs.join("cornell_point.toml")).unwrap();
+    let mut options = RenderOptions::from_scene(&scene);
+    options.iterations = 0;
+    let patches = scene::tessellate(&scene, options.patch_size).unwrap();
+    let image = render(&ctx, &scene, &patches, &options).unwrap().image;
+    let reference = Image::read_exr(&refs.join("cornell_point.direct.exr")).unwrap();
+    let e = image_error(&image, &reference).unwrap();
+    eprintln!("cornell_point direct: {e:?}");
+    // A point light's shadows from its kept cube with exact edge tests: measured RMSE 0.27%
+    // (the per-patch first shot: 5.4%, staircase shadows). Bounds: 1% RMSE, 0.5% per mean.
+    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.005) && e.relative_rmse < 0.01;
+    if !ok {
+        save_on_failure("cornell_point_direct", &image, &reference);
+    }
+    assert!(ok, "{e:?}");
 }

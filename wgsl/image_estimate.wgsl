@@ -205,7 +205,10 @@ fn nearer(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, towar
         return best;
     }
     let t = dist / denom;
-    if (t > 0.0 && t < best.t) {
+    // Back-to-back twins lie at the same t (their planes are each other's negation), but
+    // rounding can sort either first along the line: of the two, the one facing x counts.
+    let tie = abs(t - best.t) <= eps && denom < 0.0;
+    if (t > 0.0 && (t < best.t - eps || tie)) {
         return Candidate(t, m + 1u);
     }
     return best;

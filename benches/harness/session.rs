@@ -38,7 +38,8 @@ pub struct Session<'a> {
 
 impl<'a> Session<'a> {
     pub fn new(ctx: &'a Context, scene: &'a Scene, patches: &Patches, options: &RenderOptions) -> Result<Self> {
-        let options = RenderOptions { iterations: options.iterations.max(1), ..options.clone() };
+        // No burn-in: every timed step is a whole step, image stages included.
+        let options = RenderOptions { iterations: options.iterations.max(1), burn_in: Some(0), ..options.clone() };
         let renderer = Renderer::new(ctx, scene, patches, &options, &mut NoHooks)?;
         let first_shot = renderer.first_shot().cloned();
         Ok(Session {
@@ -175,11 +176,14 @@ pub fn stage_bytes(stage: &str, s: Sizes) -> f64 {
         "finalize" => s.patches * (24.0 + patch + 16.0 + state),
         // Triangles in; an id and a depth per pixel out.
         "camera" => s.patches * vertex + 8.0 * s.pixels,
-        // Per pixel: id, patch, material, state, its patch's first-shot entries, the
-        // running sum read and written.
+        // Triangles in once per face of the area lights' windows (at most 5 faces of up to
+        // 512^2 texels a light; 0 without area lights): a floor, the faces are not counted.
+        "light_windows" => s.patches * vertex,
+        // Per pixel: id, patch, material, per light a face (112 bytes), 4 texels and up to
+        // 4 triangles (48 bytes each) of the window, the gather's line offsets and 4
+        // fragments with their patches' planes and one O, the running sum read and written.
         "estimate" => {
-            let per_patch = if s.patches > 0.0 { s.pairs / s.patches } else { 0.0 };
-            s.pixels * (4.0 + patch + material + state + per_patch * (8.0 + sample) + 32.0)
+            s.pixels * (4.0 + patch + material + 112.0 + 16.0 + 4.0 * 48.0 + 8.0 + 4.0 * (8.0 + 16.0) + 16.0 + 32.0)
         }
         _ => f64::NAN,
     }
