@@ -1,4 +1,4 @@
-//! The shipped scenes against the Mitsuba 3 references in `../shared/refs/`.
+//! The shipped scenes against the Mitsuba 3 references in `refs/` (made as `refs/README.md` says).
 
 mod common;
 
@@ -50,7 +50,7 @@ fn test01_cornell_direct_light_matches_the_reference() {
         }
     }
     assert!(light_pixels > 100, "the reference should show the light, found {light_pixels} pixels");
-    // DESIGN.md / issue: mean brightness within 2% per channel. Measured: +0.4 to +0.6%.
+    // docs/ALGORITHM.md 3 / issue: mean brightness within 2% per channel. Measured: +0.4 to +0.6%.
     let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.02) && e.relative_rmse < 0.08;
     if !ok {
         save_on_failure("cornell_direct", &image, &reference);
