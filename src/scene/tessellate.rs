@@ -1,4 +1,4 @@
-//! Surfaces -> patches; lights -> light samples (DESIGN.md section 1).
+//! Surfaces -> patches; lights -> light samples (docs/ALGORITHM.md section 1).
 //!
 //! A surface triangle is cut into k^2 congruent copies of itself scaled by 1/k, so every
 //! patch of a triangle has the same area and the source's normal, and the areas add up to
