@@ -111,7 +111,7 @@ struct Args {
     /// --quick 4,16,64,256).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     peer_steps: Option<Vec<u32>>,
-    /// Mitsuba's samples per pixel in the peers study (default 1,2,4,...,512; --quick 4,16,64,256).
+    /// Mitsuba's samples per pixel in the peers study (default 1,2,4,...,1024; --quick 4,16,64,256).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     peer_spp: Option<Vec<u32>>,
     /// Samples per pixel of a reference the peers study renders itself, for a scene with no
@@ -420,7 +420,7 @@ fn main() -> ExitCode {
         peer_spp: args.peer_spp.clone().unwrap_or(if quick {
             vec![4, 16, 64, 256]
         } else {
-            (0..10).map(|k| 1 << k).collect()
+            (0..11).map(|k| 1 << k).collect()
         }),
         peer_reference_spp: args.peer_reference_spp.unwrap_or(if quick { 256 } else { 4096 }).max(2),
     };

@@ -223,7 +223,10 @@ impl Study<'_> {
         if let Some(p) = stored {
             let image = Image::read_exr(&p).map_err(|e| e.to_string())?;
             if let Some(fitted) = fit(image, size.0, size.1) {
-                return Ok((fitted, p.display().to_string(), None));
+                // Relative to the repository where it lies in it (refs/...): the JSON is
+                // committed to docs/perf/.
+                let shown = p.strip_prefix(env!("CARGO_MANIFEST_DIR")).unwrap_or(&p).display().to_string();
+                return Ok((fitted, shown, None));
             }
             eprintln!("  {} does not box-filter down to {}x{}: rendering a reference", p.display(), size.0, size.1);
         }
