@@ -12,6 +12,7 @@ use firstshot::image::{Image, image_error};
 use firstshot::scene::{self, MaterialKind, brdf};
 use glam::DVec3;
 use serde_json::Value;
+use std::f32::consts::FRAC_2_PI;
 use std::path::Path;
 
 /// Runs a script of tools/mitsuba and parses the JSON it prints.
@@ -36,7 +37,7 @@ fn materials() -> Vec<MaterialKind> {
     vec![
         phong([0.45, 0.45, 0.42], [1.2, 1.2, 1.2], 20.0), // cornell_point gloss_block
         phong([0.5, 0.42, 0.36], [0.8, 0.8, 0.8], 60.0),  // cornell_point gloss_floor
-        phong([0.18, 0.06, 0.12], [0.63662, 0.63662, 0.63662], 3.0), // sierpinski fractal
+        phong([0.18, 0.06, 0.12], [FRAC_2_PI; 3], 3.0),   // sierpinski fractal (0.63662)
         phong([0.5, 0.3, 0.1], [0.0, 0.0, 0.0], 10.0),
         phong([0.0, 0.0, 0.0], [1.0, 0.5, 0.25], 100.0),
         phong([0.1, 0.2, 0.3], [0.05, 0.1, 0.02], 0.0),

@@ -118,7 +118,7 @@ fn long_run(config: &Config, ctx: &Context, s: &LoadedScene, o: &RenderOptions) 
 
 /// `image` box-filtered down to `width` x `height` when it is that size times a power of
 /// two (a pixel of the renders is the mean over its area, which the box filter keeps).
-fn fit_reference(mut image: Image, width: u32, height: u32) -> Option<Image> {
+pub(crate) fn fit_reference(mut image: Image, width: u32, height: u32) -> Option<Image> {
     while image.width > width && image.width == 2 * (image.width / 2) && image.height == 2 * (image.height / 2) {
         image = image.downsample2();
     }

@@ -118,14 +118,6 @@ pub fn ratio(firstshot: &Option<Reach>, mitsuba: &Option<Reach>) -> String {
     }
 }
 
-/// `image` box-filtered down to `width` x `height` when it is that size times a power of two.
-fn fit(mut image: Image, width: u32, height: u32) -> Option<Image> {
-    while image.width > width && image.width % 2 == 0 && image.height % 2 == 0 {
-        image = image.downsample2();
-    }
-    ((image.width, image.height) == (width, height)).then_some(image)
-}
-
 fn firstshot_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_firstshot"))
 }
@@ -222,7 +214,7 @@ impl Study<'_> {
             .filter(|p| p.exists());
         if let Some(p) = stored {
             let image = Image::read_exr(&p).map_err(|e| e.to_string())?;
-            if let Some(fitted) = fit(image, size.0, size.1) {
+            if let Some(fitted) = crate::convergence::fit_reference(image, size.0, size.1) {
                 // Relative to the repository where it lies in it (refs/...): the JSON is
                 // committed to docs/perf/.
                 let shown = p.strip_prefix(env!("CARGO_MANIFEST_DIR")).unwrap_or(&p).display().to_string();
