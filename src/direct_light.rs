@@ -1,4 +1,4 @@
-//! Per-pixel direct light (DESIGN.md 6): the first-shot lights as the image estimate sees
+//! Per-pixel direct light (docs/ALGORITHM.md 6): the first-shot lights as the image estimate sees
 //! them, and the item buffers of their windows, which give each pixel its own visibility.
 //!
 //! A point light keeps its cube of six faces, rendered once. An area light gets a new point

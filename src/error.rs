@@ -6,7 +6,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// A scene file (or a file it references) is malformed or breaks the contract of
-    /// SCENE_FORMAT.md. `key` is the TOML key path (`shapes[2].vertices`) or `line N`.
+    /// docs/SCENE_FORMAT.md. `key` is the TOML key path (`shapes[2].vertices`) or `line N`.
     #[error("{file}: {key}: {message}")]
     Scene { file: PathBuf, key: String, message: String },
     /// A command-line value or combination of options that cannot be honoured.

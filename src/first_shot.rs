@@ -1,4 +1,4 @@
-//! Incoming first shot (DESIGN.md 1): item buffers around every light sample, reduced on
+//! Incoming first shot (docs/ALGORITHM.md 1): item buffers around every light sample, reduced on
 //! the GPU into the scalar factors r_ij, stored by patch in `SceneBuffers::first_shot`.
 
 use crate::gpu::scene_buffers::SceneBuffers;

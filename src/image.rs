@@ -1,6 +1,6 @@
 //! Images: linear float RGB in memory, EXR and tonemapped sRGB PNG on disk (each written to
 //! a temporary name and renamed, so a reader never sees half a file), and the image error
-//! of DESIGN.md section 3 that every comparison quotes.
+//! of docs/ALGORITHM.md section 3 that every comparison quotes.
 
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -163,7 +163,7 @@ impl Image {
     }
 }
 
-/// The image error of DESIGN.md section 3 of `image` against `reference`.
+/// The image error of docs/ALGORITHM.md section 3 of `image` against `reference`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct ImageError {
     /// sqrt(sum (a - b)^2 / sum b^2) over the counted pixels and channels.

@@ -1,4 +1,4 @@
-//! Ray-bundle stochastic iteration (DESIGN.md 2): the buffers of one step and the order of
+//! Ray-bundle stochastic iteration (docs/ALGORITHM.md 2): the buffers of one step and the order of
 //! its stages. Each step k draws its direction, grid rotation and sub-pixel offset from
 //! `StepRng(seed, k)`, so the state between steps is only J_j, win_j and the image sum.
 

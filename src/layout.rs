@@ -84,7 +84,7 @@ pub struct GpuLightSample {
     pub _pad: [u32; 3],
 }
 
-/// Iteration state of one patch (DESIGN.md 2): J_j and the direction win_j it travelled.
+/// Iteration state of one patch (docs/ALGORITHM.md 2): J_j and the direction win_j it travelled.
 /// WGSL: `PatchState`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
@@ -130,7 +130,7 @@ pub struct GpuEstimateParams {
     pub _pad: u32,
 }
 
-/// A light as the per-pixel direct light sees it in one pass (DESIGN.md 6). WGSL:
+/// A light as the per-pixel direct light sees it in one pass (docs/ALGORITHM.md 6). WGSL:
 /// `DirectLight`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]

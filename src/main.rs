@@ -1,4 +1,4 @@
-//! The `firstshot` command line (CLI.md): parse flags, call the library, report.
+//! The `firstshot` command line (docs/CLI.md): parse flags, call the library, report.
 
 use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
@@ -33,14 +33,14 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Image error of A against B (DESIGN.md 3): relative RMSE without the directly seen
+    /// Image error of A against B (docs/ALGORITHM.md 3): relative RMSE without the directly seen
     /// lights, ratio of the means, and per-channel means.
     Compare { a: PathBuf, b: PathBuf },
 }
 
 #[derive(Args)]
 struct RenderArgs {
-    /// The scene file (TOML, SCENE_FORMAT.md).
+    /// The scene file (TOML, docs/SCENE_FORMAT.md).
     #[arg(required_unless_present = "list_adapters")]
     scene: Option<PathBuf>,
     /// Image to write, PATH.exr (linear float RGB), and PATH.png (tonemapped sRGB) beside it.
@@ -116,7 +116,7 @@ struct RenderArgs {
     resume: bool,
 }
 
-/// A failure and the exit status it maps to (CLI.md: 2 usage or scene error, 1 run failure).
+/// A failure and the exit status it maps to (docs/CLI.md: 2 usage or scene error, 1 run failure).
 struct Failure {
     status: u8,
     error: anyhow::Error,

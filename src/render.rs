@@ -116,7 +116,7 @@ pub fn default_burn_in(scene: &Scene) -> u32 {
     ((BURN_IN_TOLERANCE.ln() / a.ln()).ceil() as u32).min(MAX_BURN_IN)
 }
 
-/// Run statistics (`--stats`, CLI.md).
+/// Run statistics (`--stats`, docs/CLI.md).
 #[derive(Debug, Clone, Serialize)]
 pub struct RenderStats {
     pub adapter: AdapterSummary,

@@ -47,7 +47,7 @@ fn test01_unoccluded_triangle_matches_its_solid_angle() {
         eprintln!("resolution {resolution}: worst relative error of the solid angle {worst:.5}");
         errors.push(worst);
     }
-    // DESIGN.md: 1% at 512 for triangles of a few hundred pixels, error of order 1/R.
+    // docs/ALGORITHM.md 1: 1% at 512 for triangles of a few hundred pixels, error of order 1/R.
     assert!(errors[3] < 0.01, "error at 512: {}", errors[3]);
     assert!(errors[4] < errors[1] / 2.0, "error does not shrink with resolution: {errors:?}");
 }

@@ -1,4 +1,4 @@
-//! The per-pixel image (DESIGN.md 6) against oracles that share no code with it: direct
+//! The per-pixel image (docs/ALGORITHM.md 6) against oracles that share no code with it: direct
 //! light from the closed form with the CPU ray caster's visibility, an area light's penumbra
 //! from the caster's numerical integral over the light, a closed furnace with an occluder,
 //! and the start-up bias.

@@ -1,4 +1,4 @@
-//! The shipped scenes against the Mitsuba 3 references in `../shared/refs/`.
+//! The shipped scenes against the Mitsuba 3 references in `refs/` (made as `refs/README.md` says).
 
 mod common;
 
@@ -99,7 +99,7 @@ fn test03_with_and_without_first_shot_converge_to_the_same_image() {
 fn test04_cornell_point_direct_light_has_straight_shadows() {
     let Some(ctx) = common::gpu() else { return };
     let refs = common::refs_dir();
-    let scene = scene::load(&refs.join("cornell_point.toml")).unwrap();
+    let scene = scene::load(&common::scenes::shipped("cornell_point")).unwrap();
     let mut options = RenderOptions::from_scene(&scene);
     options.iterations = 0;
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();

@@ -1,4 +1,4 @@
-// Bundle finalize (DESIGN.md 2.4): J_j = (dP / A_j) * (sum of received radiance) from the
+// Bundle finalize (docs/ALGORITHM.md 2.4): J_j = (dP / A_j) * (sum of received radiance) from the
 // fixed-point sums, win_j = -s_j d; the sums are cleared for the next step.
 //
 // Compute, one invocation per patch (2D dispatch past 65535 workgroups): each patch's 6

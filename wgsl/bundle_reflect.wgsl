@@ -1,4 +1,4 @@
-// Bundle reflection (DESIGN.md 2.2): the radiance every patch sends into this step's bundle,
+// Bundle reflection (docs/ALGORITHM.md 2.2): the radiance every patch sends into this step's bundle,
 //   O_j = Le_j + Lfs_j(c_j, s_j d) + 2 pi J_j f_j(win_j, c_j, s_j d),
 // with Le left out for first-shot lights (their first reflection replaces them), and the
 // largest O of the step (for the fixed-point scale of the transfer).

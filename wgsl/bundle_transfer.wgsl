@@ -1,4 +1,4 @@
-// Bundle transfer (DESIGN.md 2.3-2.4): for every line of the grid, its surfaces sorted by
+// Bundle transfer (docs/ALGORITHM.md 2.3-2.4): for every line of the grid, its surfaces sorted by
 // depth along d; each patch receives from the next surface along its front direction s_j d:
 // that surface's O if its front faces back (s_m = -s_j), black if its back does, the
 // environment if there is none. Received radiance is added to the patch's exact 64-bit

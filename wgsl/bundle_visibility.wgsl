@@ -1,4 +1,4 @@
-// Bundle visibility (DESIGN.md 2.3): every patch projected in parallel along the bundle's
+// Bundle visibility (docs/ALGORITHM.md 2.3): every patch projected in parallel along the bundle's
 // direction onto its grid; every surface crossing a pixel's line is kept, not only the
 // nearest. `fs_count` counts the surfaces per line; after a prefix sum of the counts,
 // `fs_fill` writes (depth along d, patch) into each line's slice of the fragment list.

@@ -1,4 +1,4 @@
-// Camera item buffer: which patch each camera pixel sees (DESIGN.md 4), for this pass's
+// Camera item buffer: which patch each camera pixel sees (docs/ALGORITHM.md 4), for this pass's
 // sub-pixel sample position.
 //
 // Render pass. Vertex input: RasterVertex (location 0 position, location 1 patch id with

@@ -1,4 +1,4 @@
-// First-shot reduction (DESIGN.md 1). `reduce_face` adds, for every pixel of one face of a
+// First-shot reduction (docs/ALGORITHM.md 1). `reduce_face` adds, for every pixel of one face of a
 // light sample's window, the pixel's weight cos^3(theta_p) (times cos(theta_L) for an
 // area-light vertex) to the sum of the patch seen there, if the patch's front faces the
 // sample. `append_sample` then turns each non-zero sum into r_ij and appends the pair

@@ -1,4 +1,4 @@
-// Image estimate (DESIGN.md 6): for every camera pixel, one estimate of the radiance that
+// Image estimate (docs/ALGORITHM.md 6): for every camera pixel, one estimate of the radiance that
 // leaves the point x it sees toward the eye, added to the running sum of the image:
 //   E = Le_j(w_e) + D(x, w_e) + G(x, w_e)
 // D, the direct light of every first-shot light with its own visibility of x; G, the

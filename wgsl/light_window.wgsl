@@ -1,4 +1,4 @@
-// Light windows (DESIGN.md 6): the item buffers of the lights' windows for the per-pixel
+// Light windows (docs/ALGORITHM.md 6): the item buffers of the lights' windows for the per-pixel
 // direct light, every face a tile of one atlas texture. Each draw renders every patch into
 // one face: the instance index picks the face's view, the host sets the viewport to its tile
 // and the scissor to the rows inside the window.

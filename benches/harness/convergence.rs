@@ -1,4 +1,4 @@
-//! Convergence (the paper's figure 6): the image error (DESIGN.md 3) against time, with and
+//! Convergence (the paper's figure 6): the image error (docs/ALGORITHM.md 3) against time, with and
 //! without first shot, and the equal-error speed-up of first shot.
 //!
 //! Step k's random numbers depend only on (seed, k), so a run of N steps is exactly the mean
@@ -118,7 +118,7 @@ fn long_run(config: &Config, ctx: &Context, s: &LoadedScene, o: &RenderOptions) 
 
 /// `image` box-filtered down to `width` x `height` when it is that size times a power of
 /// two (a pixel of the renders is the mean over its area, which the box filter keeps).
-fn fit_reference(mut image: Image, width: u32, height: u32) -> Option<Image> {
+pub(crate) fn fit_reference(mut image: Image, width: u32, height: u32) -> Option<Image> {
     while image.width > width && image.width == 2 * (image.width / 2) && image.height == 2 * (image.height / 2) {
         image = image.downsample2();
     }
@@ -127,7 +127,7 @@ fn fit_reference(mut image: Image, width: u32, height: u32) -> Option<Image> {
 
 /// The external reference for this scene: the one whose file name starts with the scene's
 /// stem, else the only one when there is one scene.
-fn reference_for(config: &Config, scene: &str) -> Option<PathBuf> {
+pub(crate) fn reference_for(config: &Config, scene: &str) -> Option<PathBuf> {
     let named = config.references.iter().find(|p| {
         p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(&format!("{scene}.")) || n == scene)
     });

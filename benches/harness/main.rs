@@ -1,8 +1,9 @@
 //! The benchmark harness of firstshot (issue #5): throughput per adapter, the convergence
-//! study of the paper's figure 6, and the scaling study. Prints tables, writes JSON and SVG.
+//! study of the paper's figure 6, the scaling study, and firstshot against Mitsuba 3 (peers).
+//! Prints tables, writes JSON and SVG.
 //!
 //! ```sh
-//! cargo bench --bench harness -- [throughput|convergence|scaling|all] [options]
+//! cargo bench --bench harness -- [throughput|convergence|scaling|all|peers] [options]
 //! cargo bench --bench harness -- --help
 //! ```
 //!
@@ -10,6 +11,8 @@
 //! for shader compilation, and on lavapipe for LLVM's JIT). Nothing here asserts a time.
 
 mod convergence;
+mod mitsuba;
+mod peers;
 mod scaling;
 mod session;
 mod stats;
@@ -35,16 +38,20 @@ enum Mode {
     Scaling,
     /// The three, in that order.
     All,
+    /// Time to reach 10, 5 and 2 % image error, firstshot against Mitsuba 3 on the same
+    /// machine (whole processes; needs tools/mitsuba/setup.sh, else skips visibly).
+    Peers,
 }
 
 #[derive(Parser, Debug)]
-#[command(name = "harness", about = "firstshot benchmarks: throughput, convergence, scaling")]
+#[command(name = "harness", about = "firstshot benchmarks: throughput, convergence, scaling, peers")]
 struct Args {
     /// What to measure.
     #[arg(value_enum, default_value_t = Mode::Throughput)]
     mode: Mode,
     /// Scenes: names in scenes/ (sierpinski, cornell_box) or paths to TOML files.
-    /// Default: sierpinski,cornell_box (scaling always uses sierpinski).
+    /// Default: sierpinski,cornell_box (scaling always uses sierpinski; peers:
+    /// cornell_box,cornell_point,sierpinski).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     scenes: Option<Vec<String>>,
     /// Adapters: all | first | cpu | gpu | a comma list of indices (as --list-adapters
@@ -96,6 +103,21 @@ struct Args {
     /// Steps per timed configuration of the scaling study (default 20; --quick 4).
     #[arg(long, value_name = "N")]
     scaling_steps: Option<u32>,
+    /// Image height of the peers study (width from the scene's aspect ratio; default 256;
+    /// --quick 128).
+    #[arg(long, value_name = "PIXELS")]
+    peer_size: Option<u32>,
+    /// firstshot's step counts in the peers study (default 2,5,10,20,50,100,200,500,1000;
+    /// --quick 4,16,64,256).
+    #[arg(long, value_delimiter = ',', value_name = "LIST")]
+    peer_steps: Option<Vec<u32>>,
+    /// Mitsuba's samples per pixel in the peers study (default 1,2,4,...,1024; --quick 4,16,64,256).
+    #[arg(long, value_delimiter = ',', value_name = "LIST")]
+    peer_spp: Option<Vec<u32>>,
+    /// Samples per pixel of a reference the peers study renders itself, for a scene with no
+    /// refs/<scene>.full.exr (default 4096; --quick 256). Kept in --out for the next run.
+    #[arg(long, value_name = "N")]
+    peer_reference_spp: Option<u32>,
     /// Open devices without timestamp queries (stage times are then wall times only).
     #[arg(long)]
     no_timestamps: bool,
@@ -121,6 +143,10 @@ pub struct Config {
     pub levels: Vec<u32>,
     pub resolutions: Vec<u32>,
     pub scaling_steps: u32,
+    pub peer_size: u32,
+    pub peer_steps: Vec<u32>,
+    pub peer_spp: Vec<u32>,
+    pub peer_reference_spp: u32,
 }
 
 impl Config {
@@ -360,7 +386,11 @@ pub fn spread(s: &stats::Summary, digits: usize) -> String {
 fn main() -> ExitCode {
     let args = Args::parse();
     let quick = args.quick;
-    let default_scenes = vec!["sierpinski".to_string(), "cornell_box".to_string()];
+    let default_scenes: Vec<String> = if args.mode == Mode::Peers {
+        ["cornell_box", "cornell_point", "sierpinski"].map(String::from).to_vec()
+    } else {
+        vec!["sierpinski".to_string(), "cornell_box".to_string()]
+    };
     let config = Config {
         quick,
         timestamps: !args.no_timestamps,
@@ -381,6 +411,18 @@ fn main() -> ExitCode {
         levels: args.levels.clone().unwrap_or(if quick { vec![3, 4, 5] } else { vec![3, 4, 5, 6, 7] }),
         resolutions: args.resolutions.clone().unwrap_or(if quick { vec![64, 128] } else { vec![256, 512, 1024, 2048] }),
         scaling_steps: args.scaling_steps.unwrap_or(if quick { 4 } else { 20 }).max(1),
+        peer_size: args.peer_size.unwrap_or(if quick { 128 } else { 256 }).max(2),
+        peer_steps: args.peer_steps.clone().unwrap_or(if quick {
+            vec![4, 16, 64, 256]
+        } else {
+            vec![2, 5, 10, 20, 50, 100, 200, 500, 1000]
+        }),
+        peer_spp: args.peer_spp.clone().unwrap_or(if quick {
+            vec![4, 16, 64, 256]
+        } else {
+            (0..11).map(|k| 1 << k).collect()
+        }),
+        peer_reference_spp: args.peer_reference_spp.unwrap_or(if quick { 256 } else { 4096 }).max(2),
     };
     if let Err(e) = std::fs::create_dir_all(&config.out) {
         eprintln!("error: creating {}: {e}", config.out.display());
@@ -404,6 +446,7 @@ fn main() -> ExitCode {
         Mode::Throughput => &[Mode::Throughput],
         Mode::Convergence => &[Mode::Convergence],
         Mode::Scaling => &[Mode::Scaling],
+        Mode::Peers => &[Mode::Peers],
     };
     let mut failed = false;
     for mode in modes {
@@ -411,6 +454,7 @@ fn main() -> ExitCode {
             Mode::Throughput => pick("all").and_then(|s| throughput::run(&config, &machine, &s)),
             Mode::Convergence => pick("first").and_then(|s| convergence::run(&config, &machine, &s)),
             Mode::Scaling => pick("first").and_then(|s| scaling::run(&config, &machine, &s)),
+            Mode::Peers => pick("first").and_then(|s| peers::run(&config, &machine, &s)),
             Mode::All => unreachable!(),
         };
         if let Err(e) = result {

@@ -5,7 +5,7 @@
 //! the viewer) are unit vectors pointing away from the surface. Below the surface (either
 //! cosine <= 0) a BRDF is 0.
 //!
-//! max-Phong (SCENE_FORMAT.md): `f = kd / pi + ks max(0, cos psi)^n / max(cos theta_in,
+//! max-Phong (docs/SCENE_FORMAT.md): `f = kd / pi + ks max(0, cos psi)^n / max(cos theta_in,
 //! cos theta_out)`, psi the angle between `w_out` and the mirror direction of `w_in`.
 //! `max(0, cos psi)^0` is 1 everywhere, as `powf` and the WGSL twin have it.
 

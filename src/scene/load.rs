@@ -1,4 +1,4 @@
-//! TOML (+ OBJ) -> `Scene`, with every check of SCENE_FORMAT.md.
+//! TOML (+ OBJ) -> `Scene`, with every check of docs/SCENE_FORMAT.md.
 //!
 //! The TOML is walked by hand rather than through serde: every accessor carries the key
 //! path that led to it (`shapes[3].vertices[1]`), so each refusal names its key and says

@@ -1,4 +1,4 @@
-//! Scenes: what `load` reads from a TOML file (format 1, SCENE_FORMAT.md) and what
+//! Scenes: what `load` reads from a TOML file (format 1, docs/SCENE_FORMAT.md) and what
 //! `tessellate` turns into patches and light samples.
 //!
 //! Geometry is kept in f64 on the host so that tessellation preserves areas to far better
@@ -18,7 +18,7 @@ pub use tessellate::{LightSample, Patch, PatchKind, Patches, SampleKind, tessell
 /// Linear RGB, one value per channel.
 pub type Rgb = [f32; 3];
 
-/// A loaded, validated scene. Every value here has passed the checks of SCENE_FORMAT.md.
+/// A loaded, validated scene. Every value here has passed the checks of docs/SCENE_FORMAT.md.
 #[derive(Debug, Clone)]
 pub struct Scene {
     /// The scene file it came from (errors and stats name it).

@@ -15,7 +15,7 @@ use std::fmt;
 /// Cornell box's measured left wall is 4e-3 off and must load.
 pub const POLYGON_PLANARITY: f64 = 1e-2;
 
-/// The same for area lights, whose light samples assume one plane (SCENE_FORMAT.md: "planar
+/// The same for area lights, whose light samples assume one plane (docs/SCENE_FORMAT.md: "planar
 /// within 1e-4 of its size").
 pub const LIGHT_PLANARITY: f64 = 1e-4;
 
@@ -99,7 +99,7 @@ pub fn box_triangles(min: DVec3, max: DVec3) -> Vec<[DVec3; 3]> {
     out
 }
 
-/// The Sierpinski tetrahedron of SCENE_FORMAT.md: 4^level regular tetrahedra, 4 outward
+/// The Sierpinski tetrahedron of docs/SCENE_FORMAT.md: 4^level regular tetrahedra, 4 outward
 /// triangles each. A level above `MAX_SIERPINSKI_LEVEL` (which the loader refuses) is
 /// clamped to it rather than allocating 4^level tetrahedra.
 pub fn sierpinski(center: DVec3, size: f64, level: u32) -> Vec<[DVec3; 3]> {

@@ -1,4 +1,4 @@
-//! Surfaces -> patches; lights -> light samples (DESIGN.md section 1).
+//! Surfaces -> patches; lights -> light samples (docs/ALGORITHM.md section 1).
 //!
 //! A surface triangle is cut into k^2 congruent copies of itself scaled by 1/k, so every
 //! patch of a triangle has the same area and the source's normal, and the areas add up to
@@ -651,7 +651,7 @@ pub(crate) mod tests {
         assert_eq!(scene_bounds(&Patches::default()), (DVec3::ZERO, 0.0));
     }
 
-    /// The level-l Sierpinski set of SCENE_FORMAT.md, faces outward of their own
+    /// The level-l Sierpinski set of docs/SCENE_FORMAT.md, faces outward of their own
     /// tetrahedra: just enough of the loader's shape to count patches.
     fn sierpinski(center: DVec3, size: f64, level: u32) -> Vec<[DVec3; 3]> {
         let (h, r) = (size * (2.0f64 / 3.0).sqrt(), size / 3f64.sqrt());

@@ -51,7 +51,7 @@ pub struct View {
 }
 
 impl View {
-    /// Right-handed as SCENE_FORMAT.md says: right = normalize(forward x up).
+    /// Right-handed as docs/SCENE_FORMAT.md says: right = normalize(forward x up).
     pub fn gpu(&self, jitter: [f32; 2]) -> GpuCamera {
         let forward = self.forward.normalize();
         let right = forward.cross(self.up_hint).normalize();

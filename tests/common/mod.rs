@@ -44,9 +44,30 @@ pub fn output_dir(name: &str) -> PathBuf {
     dir
 }
 
-/// `../shared/refs` beside the checkout, where the reference images are.
+/// `refs/` in the repository: the Mitsuba 3 reference images (how each was made: `refs/README.md`).
 pub fn refs_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/refs")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("refs")
+}
+
+#[path = "../../benches/harness/mitsuba.rs"]
+pub mod mitsuba;
+
+/// The Python with Mitsuba 3 (`tools/mitsuba/setup.sh` makes it). With
+/// `FIRSTSHOT_REQUIRE_MITSUBA=1` (CI) a missing one is a failure, elsewhere a visible skip.
+pub fn mitsuba_python() -> Option<mitsuba::Python> {
+    match mitsuba::find_python() {
+        Ok(p) => {
+            eprintln!("Mitsuba {} through {}", p.mitsuba_version, p.path.display());
+            Some(p)
+        }
+        Err(e) => {
+            if std::env::var("FIRSTSHOT_REQUIRE_MITSUBA").is_ok_and(|v| v == "1") {
+                panic!("FIRSTSHOT_REQUIRE_MITSUBA=1 but {e}");
+            }
+            eprintln!("SKIPPED (no Mitsuba): {e}");
+            None
+        }
+    }
 }
 
 use firstshot::scene::{LightSample, Patch, PatchKind, Patches};

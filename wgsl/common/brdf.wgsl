@@ -1,4 +1,4 @@
-// The max-Phong BRDF of SCENE_FORMAT.md, the WGSL twin of `src/scene/brdf.rs`
+// The max-Phong BRDF of docs/SCENE_FORMAT.md, the WGSL twin of `src/scene/brdf.rs`
 // (`tests/brdf_gpu.rs` compares the two on the GPU to 1e-5, widened only by how far f32
 // rounding of the three cosines moves f: at grazing and near a narrow lobe's mirror direction).
 // Directions point away from the surface: w_in toward the light, w_out toward the viewer.
