@@ -184,6 +184,14 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
     return sum;
 }
 
+// `found`, or fragment k + 1 of the line [begin, end) if it belongs to patch j.
+fn own_fragment(found: u32, k: u32, range: vec2<u32>, j: u32) -> u32 {
+    if (found != NO_PATCH || k < range.x || k >= range.y || (fragments[k].y & ~FRAGMENT_FRONT_BIT) != j) {
+        return found;
+    }
+    return k + 1u;
+}
+
 struct Candidate {
     t: f32,
     patch_id: u32,
@@ -244,11 +252,35 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
             hi = mid;
         }
     }
-    // The nearest of the next four fragments in the direction of travel, by
+    // Where x's own patch j lies on the line (its fragment within two places of x's depth),
+    // x receives what j receives there in the transfer: from the next fragment in j's front
+    // direction, O if that one's front faces back, black if its back does, the environment
+    // past the line's end. Then the gather agrees with the patch state J_j it refines, also
+    // at contacts, where the line's centre and x's own ray can pass on different sides.
+    let range = vec2<u32>(begin, end);
+    var own = NO_PATCH;
+    own = own_fragment(own, lo - 2u, range, j);
+    own = own_fragment(own, lo - 1u, range, j);
+    own = own_fragment(own, lo, range, j);
+    own = own_fragment(own, lo + 1u, range, j);
+    own = own_fragment(own, lo + 2u, range, j);
+    if (own != NO_PATCH) {
+        let k = own - 1u;
+        let front = (fragments[k].y & FRAGMENT_FRONT_BIT) != 0u;
+        if ((front && k + 1u >= end) || (!front && k == begin)) {
+            return bundle.environment.rgb;
+        }
+        let other = fragments[select(k - 1u, k + 1u, front)].y;
+        if (((other & FRAGMENT_FRONT_BIT) != 0u) != front) {
+            return outgoing[other & ~FRAGMENT_FRONT_BIT].rgb;
+        }
+        return vec3<f32>(0.0);
+    }
+    // Else (x near j's edge, the line's centre on another patch): the nearest of the next
+    // four fragments in the direction of travel, by
     // the exact distance from x along the ray to each one's plane. Unrolled: a CPU adapter
     // runs a data-dependent loop over storage many times slower.
     var best = Candidate(3.4e38, NO_PATCH);
-    let range = vec2<u32>(begin, end);
     let eps = 1e-5 / bundle.centre.w;
     if (s > 0.0) {
         best = nearer(best, lo, range, j, x, toward, eps);
