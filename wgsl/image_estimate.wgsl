@@ -78,7 +78,19 @@ fn atlas_id(atlas: u32, at: vec2<i32>) -> u32 {
 // Whether the surface `id` (patch index + 1) of a window texel lies on the segment from y to x,
 // x on patch j.
 fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
-    return id != NO_PATCH && id - 1u != j && id <= params.patch_count && segment_hits(id - 1u, y, x);
+    if (id == NO_PATCH || id - 1u == j || id > params.patch_count) {
+        return false;
+    }
+    // Most surfaces around the direction cannot cross the segment: those whose plane has y
+    // and x on one side, and those whose plane holds x (x's neighbours in its own plane). One
+    // load of the plane rules them out before the triangle test's three.
+    let plane = patches[id - 1u].normal;
+    let side_y = dot(plane.xyz, y) - plane.w;
+    let side_x = dot(plane.xyz, x) - plane.w;
+    if (side_y * side_x > 0.0 || abs(side_x) <= SEGMENT_EPSILON * length(x - y)) {
+        return false;
+    }
+    return segment_hits(id - 1u, y, x);
 }
 
 // The face of a window that holds direction w (from the light toward x): the one whose
