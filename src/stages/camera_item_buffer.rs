@@ -173,32 +173,40 @@ impl CameraItemBuffer {
         patch_count: u32,
         rows: u32,
     ) {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("firstshot.camera_item_buffer.pass"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &self.ids_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &self.depth_view,
-                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = begin_item_pass(encoder, "firstshot.camera_item_buffer.pass", &self.ids_view, &self.depth_view);
         pass.set_pipeline(&self.pipeline);
         pass.set_scissor_rect(0, 0, self.width, rows.clamp(1, self.height));
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(0, vertices.slice(..));
         pass.draw(0..patch_count * 3, 0..1);
     }
+}
+
+/// A render pass that clears an item buffer (`ids` to NO_PATCH, its reversed-z depth to 0,
+/// kept only while the pass runs), shared by the camera's and the light windows' passes.
+pub fn begin_item_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    ids: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+) -> wgpu::RenderPass<'e> {
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: ids,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth,
+            depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
 }
 
 /// The vertex layout of `RasterVertex`, shared by every rasterising stage.

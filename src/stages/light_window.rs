@@ -3,7 +3,7 @@
 
 use crate::gpu::bindings::{KernelSpec, fragment, read, vertex};
 use crate::layout::GpuWindowFace;
-use crate::stages::camera_item_buffer::{DEPTH_FORMAT, ID_FORMAT, raster_vertex_layout};
+use crate::stages::camera_item_buffer::{DEPTH_FORMAT, ID_FORMAT, begin_item_pass, raster_vertex_layout};
 
 /// Render pass: vertex input `RasterVertex`, an R32Uint target of patch index + 1; the
 /// instance index picks the face.
@@ -99,26 +99,7 @@ impl WindowAtlas {
         patch_count: u32,
         faces: &[(u32, GpuWindowFace)],
     ) {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("firstshot.light_window.pass"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &self.ids_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &self.depth_view,
-                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Discard }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = begin_item_pass(encoder, "firstshot.light_window.pass", &self.ids_view, &self.depth_view);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(0, vertices.slice(..));
