@@ -1,6 +1,6 @@
 //! Camera item buffer (`wgsl/camera_item_buffer.wgsl`): patch id + 1 per camera pixel.
 
-use crate::gpu::bindings::{KernelSpec, fragment, uniform, vertex};
+use crate::gpu::bindings::{Kernel, KernelSpec, fragment, uniform, vertex};
 use crate::gpu::buffers;
 use crate::layout::{GpuCamera, RasterVertex};
 use crate::scene::Camera;
@@ -83,42 +83,7 @@ pub struct CameraItemBuffer {
 impl CameraItemBuffer {
     pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
         let built = SPEC.build(device);
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("firstshot.camera_item_buffer.pipeline"),
-            layout: Some(&built.pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &built.module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(raster_vertex_layout())],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                front_face: wgpu::FrontFace::Ccw,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &built.module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: ID_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = item_pipeline(device, &built, "firstshot.camera_item_buffer.pipeline");
         let camera = buffers::uniform(
             device,
             "firstshot.camera_item_buffer.camera",
@@ -180,6 +145,49 @@ impl CameraItemBuffer {
         pass.set_vertex_buffer(0, vertices.slice(..));
         pass.draw(0..patch_count * 3, 0..1);
     }
+}
+
+/// The render pipeline of an item buffer (`vs_main`, `fs_main` of `kernel`): every patch
+/// rasterised, no culling (a surface seen from its back still occludes), patch id + 1 into
+/// `ID_FORMAT`, the nearest by reversed-z depth. Shared by the camera's and the light
+/// windows' item buffers.
+pub fn item_pipeline(device: &wgpu::Device, kernel: &Kernel, label: &str) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(&kernel.pipeline_layout),
+        vertex: wgpu::VertexState {
+            module: &kernel.module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[Some(raster_vertex_layout())],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            front_face: wgpu::FrontFace::Ccw,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &kernel.module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: ID_FORMAT,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }
 
 /// A render pass that clears an item buffer (`ids` to NO_PATCH, its reversed-z depth to 0,

@@ -3,7 +3,7 @@
 
 use crate::gpu::bindings::{KernelSpec, fragment, read, vertex};
 use crate::layout::GpuWindowFace;
-use crate::stages::camera_item_buffer::{DEPTH_FORMAT, ID_FORMAT, begin_item_pass, raster_vertex_layout};
+use crate::stages::camera_item_buffer::{DEPTH_FORMAT, ID_FORMAT, begin_item_pass, item_pipeline};
 
 /// Render pass: vertex input `RasterVertex`, an R32Uint target of patch index + 1; the
 /// instance index picks the face.
@@ -27,38 +27,7 @@ impl WindowAtlas {
     /// An atlas of `size` texels whose faces are entries of `faces` (array<WindowFace>).
     pub fn new(device: &wgpu::Device, label: &str, faces: &wgpu::Buffer, size: [u32; 2]) -> Self {
         let built = SPEC.build(device);
-        let module = &built.module;
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("firstshot.light_window.pipeline"),
-            layout: Some(&built.pipeline_layout),
-            vertex: wgpu::VertexState {
-                module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(raster_vertex_layout())],
-            },
-            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: ID_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = item_pipeline(device, &built, "firstshot.light_window.pipeline");
         let bind_group = built.bind_group(device, 0, &[("faces", faces.into())]);
         let texture = |format, usage, what: &str| {
             device.create_texture(&wgpu::TextureDescriptor {
