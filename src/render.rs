@@ -352,6 +352,9 @@ impl<'a> Renderer<'a> {
             Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
         };
         let estimate = ImageEstimate::new(device, &buffers, &camera, &direct, iteration.as_ref().map(|i| &i.gather));
+        // The same for every pass of the render: it gathers exactly when there is an iteration.
+        let gather = iteration.is_some();
+        estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), gather);
         let burn_in = match options.iterations {
             0 => 0,
             _ => options.burn_in.unwrap_or_else(|| default_burn_in(scene)),
@@ -420,13 +423,6 @@ impl<'a> Renderer<'a> {
             // A new point on every area light (and its windows) every `window_steps` steps.
             let pass = (k - self.burn_in) as u64 / self.options.window_steps.max(1) as u64;
             self.windows_due = self.direct.prepare_pass(queue, pass);
-            self.estimate.set_params(
-                queue,
-                self.scene.environment,
-                self.buffers.patch_count,
-                self.direct.count(),
-                true,
-            );
         }
     }
 
@@ -577,8 +573,6 @@ impl<'a> Renderer<'a> {
         let passes = self.options.direct_passes.max(1);
         let per_axis = (passes as f64).sqrt().floor().max(1.0) as u32;
         let queue = &self.ctx.queue;
-        let (environment, patch_count) = (self.scene.environment, self.buffers.patch_count);
-        self.estimate.set_params(queue, environment, patch_count, self.direct.count(), false);
         // Pass k takes light triangle k mod T; the camera cells go in a shuffled order, so
         // that a pixel's sub-position is not tied to a part of the light.
         let cells = per_axis * per_axis;
