@@ -29,11 +29,13 @@ pub struct BundleScene {
 /// The bundle of step `step` (the one place a `GpuBundle` is made): direction uniform on
 /// the sphere (stratified over blocks of steps, `rng::stratified_direction`), grid rotated
 /// uniformly about it and shifted by a uniform sub-pixel offset;
-/// the grid covers the bounding sphere. Returns the step's generator, advanced past the
-/// bundle's numbers, for the rest of the step's random choices.
+/// the grid covers the bounding sphere. `image_step`: the step is past the burn-in, so its J
+/// joins the state's running sum. Returns the step's generator, advanced past the bundle's
+/// numbers, for the rest of the step's random choices.
 pub fn bundle_of_step(
     seed: u64,
     step: u64,
+    image_step: bool,
     scene: &BundleScene,
     resolution: u32,
     capacity: u32,
@@ -63,6 +65,8 @@ pub fn bundle_of_step(
         capacity,
         // J is zero before the first step has written it.
         use_state: (step > 0) as u32,
+        image_step: image_step as u32,
+        _pad: [0; 3],
     };
     (bundle, rng)
 }
@@ -94,12 +98,13 @@ pub fn fragment_bound(patches: &Patches, radius: f64, resolution: u32) -> u64 {
 }
 
 /// What the image estimate reads of a step to gather per pixel: the bundle, its sorted
-/// lines (offsets and fragments) and the patches' outgoing radiance O_j.
+/// lines (offsets and fragments) and what each patch sends the image (`image_outgoing` of
+/// `bundle_reflect`).
 pub struct GatherBuffers {
     pub bundle: wgpu::Buffer,
     pub offsets: wgpu::Buffer,
     pub fragments: wgpu::Buffer,
-    pub outgoing: wgpu::Buffer,
+    pub image_outgoing: wgpu::Buffer,
 }
 
 /// The buffers and stages of a step.
@@ -144,6 +149,7 @@ impl Iteration {
             mapped_at_creation: false,
         });
         let outgoing = buffers::storage_zeroed(device, "firstshot.iteration.outgoing", 16 * n, none);
+        let image_outgoing = buffers::storage_zeroed(device, "firstshot.iteration.image_outgoing", 16 * n, none);
         let max_bits = buffers::storage_zeroed(device, "firstshot.iteration.max_bits", 16, none);
         let counts = buffers::storage_zeroed(device, "firstshot.iteration.counts", 4 * (lines as u64 + 1), none);
         // COPY_SRC: `fragments` reads its last entry back.
@@ -158,7 +164,7 @@ impl Iteration {
         let overflow = buffers::storage_zeroed(device, "firstshot.iteration.overflow", 4, wgpu::BufferUsages::COPY_SRC);
         let sums = buffers::storage_zeroed(device, "firstshot.iteration.sums", 24 * n, none);
         Ok(Iteration {
-            reflect: BundleReflect::new(device, scene, &bundle, &outgoing, &max_bits),
+            reflect: BundleReflect::new(device, scene, &bundle, &outgoing, &max_bits, &image_outgoing),
             visibility: BundleVisibility::new(
                 device,
                 [&bundle, &counts, &offsets, &cursor, &fragments, &overflow, &outgoing],
@@ -175,7 +181,7 @@ impl Iteration {
                 bundle: bundle.clone(),
                 offsets: offsets.clone(),
                 fragments: fragments.clone(),
-                outgoing: outgoing.clone(),
+                image_outgoing: image_outgoing.clone(),
             },
             bundle,
             counts,
@@ -185,14 +191,21 @@ impl Iteration {
             offsets: offsets.clone(),
             capacity: capacity as u32,
             resolution,
-            _owned: vec![outgoing, offsets, fragments, sums],
+            _owned: vec![outgoing, image_outgoing, offsets, fragments, sums],
         })
     }
 
     /// Writes the bundle uniform of step `step` and returns the step's generator (see
     /// `bundle_of_step`).
-    pub fn write_bundle(&self, queue: &wgpu::Queue, seed: u64, step: u64, scene: &BundleScene) -> StepRng {
-        let (bundle, rng) = bundle_of_step(seed, step, scene, self.resolution, self.capacity);
+    pub fn write_bundle(
+        &self,
+        queue: &wgpu::Queue,
+        seed: u64,
+        step: u64,
+        image_step: bool,
+        scene: &BundleScene,
+    ) -> StepRng {
+        let (bundle, rng) = bundle_of_step(seed, step, image_step, scene, self.resolution, self.capacity);
         queue.write_buffer(&self.bundle, 0, bytemuck::bytes_of(&bundle));
         rng
     }

@@ -93,6 +93,15 @@ pub struct GpuPatchState {
     pub incoming: [f32; 4],
     /// xyz: win_j, the direction of travel of that light (unit); zero before step 1.
     pub direction: [f32; 4],
+    /// rgb: K_j = J_j - (|n_j . d| - 1/2) Lbar_j, J_j with its control variate: what the
+    /// patch reflects diffusely (docs/ALGORITHM.md 2.4).
+    pub diffuse: [f32; 4],
+    /// rgb: Lbar_j, a running estimate of the mean radiance arriving at the patch (the
+    /// control variate's weight).
+    pub mean_radiance: [f32; 4],
+    /// rgb: the sum of K_j over the image steps so far; w: their number. The image's senders
+    /// reflect its mean diffusely (docs/ALGORITHM.md 6).
+    pub diffuse_sum: [f32; 4],
 }
 
 /// A pinhole camera with the sub-pixel position of this pass's sample. WGSL: `Camera`.
@@ -124,10 +133,7 @@ pub struct GpuEstimateParams {
     pub patch_count: u32,
     /// Entries of the direct-light table.
     pub light_count: u32,
-    /// 1 when this pass gathers indirect light through the step's bundle, 0 for a
-    /// direct-light-only pass.
-    pub gather: u32,
-    pub _pad: u32,
+    pub _pad: [u32; 2],
 }
 
 /// A light as the per-pixel direct light sees it in one pass (docs/ALGORITHM.md 6). WGSL:
@@ -214,6 +220,9 @@ pub struct GpuBundle {
     pub capacity: u32,
     /// 1 once the iteration state holds J (after step 1).
     pub use_state: u32,
+    /// 1 on an image step (past the burn-in): its J joins the running sum of the state.
+    pub image_step: u32,
+    pub _pad: [u32; 3],
 }
 
 /// A vertex of the rasterised patch triangles: position and patch id (with
@@ -258,14 +267,14 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuPatch => "Patch" { v0, v1, v2, normal, emission, material, flags }),
         layout!(GpuMaterial => "Material" { diffuse, specular, kind }),
         layout!(GpuLightSample => "LightSample" { position, normal, strength, kind }),
-        layout!(GpuPatchState => "PatchState" { incoming, direction }),
+        layout!(GpuPatchState => "PatchState" { incoming, direction, diffuse, mean_radiance, diffuse_sum }),
         layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),
-        layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count, gather }),
+        layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count }),
         layout!(GpuDirectLight => "DirectLight" { position, normal, strength, kind, first_face, faces }),
         layout!(GpuWindowFace => "WindowFace" { view, tile }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
         layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
-        layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state }),
+        layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state, image_step }),
     ]
 }
 

@@ -306,6 +306,8 @@ pub struct Renderer<'a> {
     iteration: Option<Iteration>,
     /// Steps before the first one averaged into the image.
     burn_in: u32,
+    /// Whether this pass estimates the direct light (`image_stages`).
+    direct_due: bool,
     /// Whether this pass renders the area lights' windows at new points.
     windows_due: bool,
     first_shot: Option<FirstShotStats>,
@@ -352,9 +354,7 @@ impl<'a> Renderer<'a> {
             Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
         };
         let estimate = ImageEstimate::new(device, &buffers, &camera, &direct, iteration.as_ref().map(|i| &i.gather));
-        // The same for every pass of the render: it gathers exactly when there is an iteration.
-        let gather = iteration.is_some();
-        estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), gather);
+        estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count());
         let burn_in = match options.iterations {
             0 => 0,
             _ => options.burn_in.unwrap_or_else(|| default_burn_in(scene)),
@@ -370,6 +370,7 @@ impl<'a> Renderer<'a> {
             estimate,
             iteration,
             burn_in,
+            direct_due: true,
             windows_due: true,
             first_shot,
             patch_count: patches.patches.len(),
@@ -412,17 +413,22 @@ impl<'a> Renderer<'a> {
     }
 
     /// Writes the uniforms of step `k`: its bundle, then, once past the burn-in, its camera
-    /// sample (a uniform point of every pixel) and its points on the area lights, all from
-    /// the step's own generator.
+    /// sample (a uniform point of every pixel) and, every `window_steps` steps, new points on
+    /// the area lights for a direct-light estimate, all from the step's own generator.
     pub fn write_step(&mut self, k: u32) {
         let queue = &self.ctx.queue;
-        let mut rng = self.iteration().write_bundle(queue, self.options.seed, k as u64, &self.bundle_scene());
-        if k >= self.burn_in {
+        let image_step = k >= self.burn_in;
+        let mut rng =
+            self.iteration().write_bundle(queue, self.options.seed, k as u64, image_step, &self.bundle_scene());
+        if image_step {
             let jitter = [rng.uniform() as f32, rng.uniform() as f32];
             self.write_camera(jitter);
-            // A new point on every area light (and its windows) every `window_steps` steps.
-            let pass = (k - self.burn_in) as u64 / self.options.window_steps.max(1) as u64;
-            self.windows_due = self.direct.prepare_pass(queue, pass);
+            let every = self.options.window_steps.max(1);
+            self.direct_due = (k - self.burn_in) % every == 0;
+            if self.direct_due {
+                let pass = ((k - self.burn_in) / every) as u64;
+                self.windows_due = self.direct.prepare_pass(queue, pass);
+            }
         }
     }
 
@@ -437,31 +443,36 @@ impl<'a> Renderer<'a> {
     pub fn step_stages(&self, k: u32) -> Vec<Stage<'_>> {
         let mut stages = self.iteration().stages(&self.buffers);
         if k >= self.burn_in {
-            stages.extend(self.image_stages());
+            stages.extend(self.image_stages(self.direct_due, true));
         }
         stages
     }
 
-    /// The stages that add one estimate of every pixel to the image sum: the area lights'
-    /// windows at this pass's points, the camera item buffer, the estimate.
-    fn image_stages(&self) -> Vec<Stage<'_>> {
-        let (camera, estimate, buffers, direct) = (&self.camera, &self.estimate, &self.buffers, &self.direct);
-        let due = self.windows_due;
-        vec![
-            (
+    /// The stages that add one estimate of every pixel to the image sum: the camera item
+    /// buffer, then, if `direct`, the area lights' windows at this pass's points and the
+    /// estimate of Le + D, then, if `gather`, the estimate of G through this step's bundle.
+    fn image_stages(&self, direct: bool, gather: bool) -> Vec<Stage<'_>> {
+        let (camera, estimate, buffers, lights) = (&self.camera, &self.estimate, &self.buffers, &self.direct);
+        let windows_due = direct && self.windows_due;
+        let mut stages: Vec<Stage<'_>> = vec![(
+            "camera",
+            Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
+        )];
+        if direct {
+            stages.push((
                 "light_windows",
                 Box::new(move |e: &mut wgpu::CommandEncoder| {
-                    if due {
-                        direct.record_pass(e, buffers)
+                    if windows_due {
+                        lights.record_pass(e, buffers)
                     }
                 }),
-            ),
-            (
-                "camera",
-                Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
-            ),
-            ("estimate", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record(e))),
-        ]
+            ));
+            stages.push(("direct", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_direct(e))));
+        }
+        if gather {
+            stages.push(("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e))));
+        }
+        stages
     }
 
     /// Writes step `k`'s uniforms and submits the whole step in one command buffer.
@@ -592,7 +603,7 @@ impl<'a> Renderer<'a> {
             ];
             self.write_camera([jitter[0] as f32, jitter[1] as f32]);
             self.windows_due = self.direct.prepare_pass(queue, k as u64);
-            self.submit(&self.image_stages(), "firstshot.render.direct_image");
+            self.submit(&self.image_stages(true, false), "firstshot.render.direct_image");
         }
     }
 

@@ -13,8 +13,7 @@ use firstshot::scene::{Material, MaterialKind, Patches};
 use glam::DVec3;
 
 const RESOLUTION: u32 = 64;
-const STAGES: [&str; 10] =
-    ["clear", "reflect", "count", "prefix_sum", "fill", "transfer", "finalize", "light_windows", "camera", "estimate"];
+const BUNDLE_STAGES: [&str; 7] = ["clear", "reflect", "count", "prefix_sum", "fill", "transfer", "finalize"];
 
 /// A closed diffuse room with glowing walls, seen from inside: every step has work in
 /// every stage.
@@ -43,6 +42,8 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
         bundle_resolution: RESOLUTION,
         // Every step reaches the image, so every stage runs.
         burn_in: Some(0),
+        // Step 0 estimates the direct light and gathers, steps 1 and 2 only gather.
+        window_steps: 2,
         ..RenderOptions::from_scene(&scene)
     };
     let mut renderer = Renderer::new(ctx, &scene, &patches, &options, &mut NoHooks).unwrap();
@@ -51,7 +52,15 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
         if profiled {
             let times = renderer.profile_step(k, &timer, vec![]).unwrap();
             let names: Vec<&str> = times.iter().map(|t| t.name).collect();
-            assert_eq!(names, STAGES);
+            // The direct light every `window_steps` steps (the first of each group), the
+            // gather every step.
+            let mut expected = BUNDLE_STAGES.to_vec();
+            expected.push("camera");
+            if k % options.window_steps == 0 {
+                expected.extend(["light_windows", "direct"]);
+            }
+            expected.push("gather");
+            assert_eq!(names, expected, "step {k}");
             assert!(times.iter().all(|t| t.wall_ms >= 0.0));
             assert_eq!(times.iter().all(|t| t.gpu_ms.is_some()), timer.has_timestamps());
         } else {

@@ -16,6 +16,7 @@
 @group(0) @binding(3) var<storage, read> state: array<PatchState>;
 @group(0) @binding(4) var<storage, read_write> outgoing: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> max_bits: atomic<u32>;
+@group(0) @binding(6) var<storage, read_write> image_outgoing: array<vec4<f32>>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -39,10 +40,26 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let m = materials[p.material];
     let c = patch_centre(p);
     o += first_shot_radiance(j, c, n, m, w_out);
+    // What the image gathers from j: its diffuse reflection of the mean J of the image steps
+    // so far (a direction-free estimate with none of the chain's step-to-step noise), its
+    // glossy reflection of this step's J (the one sample of win it has).
+    var image_o = o;
     if (bundle.use_state != 0u) {
         let s = state[j];
-        o += 2.0 * PI * s.incoming.rgb * brdf(m, n, -s.direction.xyz, w_out);
+        let w_in = -s.direction.xyz;
+        var glossy = vec3<f32>(0.0);
+        if (dot(n, w_in) > 0.0 && dot(n, w_out) > 0.0) {
+            glossy = 2.0 * PI * s.incoming.rgb * brdf_glossy(m, n, w_in, w_out);
+        }
+        o += 2.0 * m.diffuse.rgb * s.diffuse.rgb + glossy;
+        var mean = s.diffuse.rgb;
+        if (s.diffuse_sum.w > 0.0) {
+            mean = s.diffuse_sum.rgb / s.diffuse_sum.w;
+        }
+        image_o += 2.0 * m.diffuse.rgb * mean + glossy;
     }
     outgoing[j] = vec4<f32>(o, side);
-    atomicMax(&max_bits, bitcast<u32>(max(o.r, max(o.g, o.b))));
+    image_outgoing[j] = vec4<f32>(image_o, side);
+    let largest = abs(o);
+    atomicMax(&max_bits, bitcast<u32>(max(largest.r, max(largest.g, largest.b))));
 }

@@ -2,7 +2,7 @@
 // depth along d; each patch receives from the next surface along its front direction s_j d:
 // that surface's O if its front faces back (s_m = -s_j), black if its back does, the
 // environment if there is none. Received radiance is added to the patch's exact 64-bit
-// fixed-point sums (scaled so the step's largest radiance fits in 31 bits), so the result
+// signed fixed-point sums (scaled so the step's largest magnitude fits in 30 bits), so the result
 // does not depend on thread order and needs no float atomics.
 //
 // Compute, one invocation per line (2D dispatch past 65535 workgroups), which sorts its
@@ -17,10 +17,11 @@
 @group(0) @binding(4) var<storage, read_write> sums: array<atomic<u32>>;
 @group(0) @binding(5) var<storage, read> max_bits: array<u32>;
 
-// Fixed-point scale 2^(31 - e) with largest radiance <= 2^e: shared with bundle_finalize.
+// Fixed-point scale 2^(30 - e) with largest magnitude < 2^e (a rounded value stays below
+// 2^30, a sign bit to spare): shared with bundle_finalize.
 fn transfer_scale(bits: u32) -> f32 {
     let e = i32((bits >> 23u) & 0xffu) - 126;
-    return exp2(f32(31 - e));
+    return exp2(f32(30 - e));
 }
 
 // Sort key order: depth, then the surface facing -d first (back-to-back twins lie at the
@@ -35,10 +36,13 @@ fn before(a: vec2<u32>, b: vec2<u32>) -> bool {
     return a.y < b.y;
 }
 
-fn add_fixed(index: u32, value: u32) {
-    let old = atomicAdd(&sums[index], value);
-    if (old > 0xffffffffu - value) {
-        atomicAdd(&sums[index + 1u], 1u);
+fn add_fixed(index: u32, value: i32) {
+    let low = bitcast<u32>(value);
+    let old = atomicAdd(&sums[index], low);
+    // The high word gets the carry of the low one and the sign extension of the value.
+    let high = select(0u, 1u, old > 0xffffffffu - low) + select(0u, 0xffffffffu, value < 0);
+    if (high != 0u) {
+        atomicAdd(&sums[index + 1u], high);
     }
 }
 
@@ -82,8 +86,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             received = select(vec3<f32>(0.0), outgoing[other & ~FRAGMENT_FRONT_BIT].rgb, other_front != front);
         }
         for (var c = 0u; c < 3u; c++) {
-            let value = u32(received[c] * scale + 0.5);
-            if (value != 0u) {
+            let value = i32(round(received[c] * scale));
+            if (value != 0) {
                 add_fixed(6u * j + 2u * c, value);
             }
         }

@@ -17,8 +17,14 @@
 // plane, among the fragments of the line near x) sends O_m if its front faces x, black if
 // its back does; the environment if there is none.
 //
-// Compute, one invocation per pixel: the only writer of its image_sum. Group 1: the direct
-// lights and their window atlases; group 2: this step's bundle, sorted by bundle_transfer.
+// The image sum has two halves, each a running sum (rgb) and count (w) per pixel: Le + D
+// (entry point `direct`, on the passes that draw new light points) and G (entry point
+// `gather`, every step); the image is the sum of their means (the direct light converges
+// in far fewer passes than the indirect, so it is not paid for every step).
+//
+// Compute, one invocation per pixel: the only writer of its entries of image_sum. Group 1:
+// the direct lights and their window atlases; group 2: this step's bundle, sorted by
+// bundle_transfer.
 // Host: src/stages/image_estimate.rs. Its `SPEC` is the one statement of the bindings (names,
 // kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
@@ -35,7 +41,7 @@
 @group(2) @binding(0) var<uniform> bundle: Bundle;
 @group(2) @binding(1) var<storage, read> offsets: array<u32>;
 @group(2) @binding(2) var<storage, read> fragments: array<vec2<u32>>;
-@group(2) @binding(3) var<storage, read> outgoing: array<vec4<f32>>;
+@group(2) @binding(3) var<storage, read> image_outgoing: array<vec4<f32>>;
 
 // The segment from y to x leaves out this share of its length at each end: its ends lie on
 // the light and on x's own surface.
@@ -284,7 +290,7 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
         }
         let other = fragments[select(k - 1u, k + 1u, front)].y;
         if (((other & FRAGMENT_FRONT_BIT) != 0u) != front) {
-            return outgoing[other & ~FRAGMENT_FRONT_BIT].rgb;
+            return image_outgoing[other & ~FRAGMENT_FRONT_BIT].rgb;
         }
         return vec3<f32>(0.0);
     }
@@ -311,43 +317,86 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
     let m = best.patch_id - 1u;
     // Its front must face x: against the direction of travel.
     if (dot(patches[m].normal.xyz, toward) < 0.0) {
-        return outgoing[m].rgb;
+        return image_outgoing[m].rgb;
     }
     return vec3<f32>(0.0);
 }
 
+// The surface point a camera pixel sees in this pass: x on patch j (normal n) with w_out
+// toward the eye; `kind` says whether there is one (SEEN_SURFACE), the pixel sees the
+// environment (SEEN_NOTHING) or a surface's back (SEEN_BACK, black).
+const SEEN_NOTHING: u32 = 0u;
+const SEEN_SURFACE: u32 = 1u;
+const SEEN_BACK: u32 = 2u;
+
+struct Seen {
+    kind: u32,
+    j: u32,
+    x: vec3<f32>,
+    n: vec3<f32>,
+    w_out: vec3<f32>,
+}
+
+fn seen(pixel: vec2<u32>) -> Seen {
+    let id = textureLoad(item_buffer, vec2<i32>(pixel), 0).x;
+    var out = Seen(SEEN_NOTHING, 0u, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    if (id == NO_PATCH || id > params.patch_count) {
+        return out;
+    }
+    let j = id - 1u;
+    // Field by field: a CPU adapter loads every field of a whole-struct read.
+    let plane = patches[j].normal;
+    let n = plane.xyz;
+    // The ray through this pass's sample point of the pixel.
+    let dir = normalize(pixel_direction(camera, pixel));
+    out.kind = SEEN_BACK;
+    if (dot(n, -dir) > 0.0) {
+        let t = (plane.w - dot(n, camera.eye.xyz)) / dot(n, dir);
+        out = Seen(SEEN_SURFACE, j, camera.eye.xyz + t * dir, n, -dir);
+    }
+    return out;
+}
+
+// Le + D: emission and the direct light of every first-shot light, or the environment, added
+// to the first half of the image sum.
 @compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
     if (gid.x >= size.x || gid.y >= size.y) {
         return;
     }
-    let id = textureLoad(item_buffer, vec2<i32>(gid.xy), 0).x;
+    let at = seen(gid.xy);
     var radiance = params.environment.rgb;
-    if (id != NO_PATCH && id <= params.patch_count) {
-        let j = id - 1u;
-        // Field by field: a CPU adapter loads every field of a whole-struct read.
-        let plane = patches[j].normal;
-        let n = plane.xyz;
-        // The ray through this pass's sample point of the pixel.
-        let dir = normalize(pixel_direction(camera, gid.xy));
-        let w_out = -dir;
+    if (at.kind == SEEN_BACK) {
         radiance = vec3<f32>(0.0);
-        if (dot(n, w_out) > 0.0) {
-            let t = (plane.w - dot(n, camera.eye.xyz)) / dot(n, dir);
-            let x = camera.eye.xyz + t * dir;
-            let m = materials[patches[j].material];
-            radiance = patches[j].emission.rgb + direct_light(j, x, n, m, w_out);
-            if (params.gather != 0u) {
-                let d = bundle.direction.xyz;
-                let s = bundle_side(n, d);
-                let toward = s * d;
-                // -s d has density 1 / (2 pi) on x's hemisphere.
-                let incoming = gathered(j, x, toward, s);
-                radiance += 2.0 * PI * incoming * abs(dot(n, d)) * brdf(m, n, toward, w_out);
-            }
-        }
+    }
+    if (at.kind == SEEN_SURFACE) {
+        let m = materials[patches[at.j].material];
+        radiance = patches[at.j].emission.rgb + direct_light(at.j, at.x, at.n, m, at.w_out);
     }
     let pixel = gid.y * size.x + gid.x;
+    image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
+}
+
+// G: the indirect light gathered through this step's bundle, added to the second half of
+// the image sum.
+@compute @workgroup_size(8, 8)
+fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let size = camera.size.xy;
+    if (gid.x >= size.x || gid.y >= size.y) {
+        return;
+    }
+    let at = seen(gid.xy);
+    var radiance = vec3<f32>(0.0);
+    if (at.kind == SEEN_SURFACE) {
+        let m = materials[patches[at.j].material];
+        let d = bundle.direction.xyz;
+        let s = bundle_side(at.n, d);
+        let toward = s * d;
+        // -s d has density 1 / (2 pi) on x's hemisphere.
+        let incoming = gathered(at.j, at.x, toward, s);
+        radiance = 2.0 * PI * incoming * abs(dot(at.n, d)) * brdf(m, at.n, toward, at.w_out);
+    }
+    let pixel = size.x * size.y + gid.y * size.x + gid.x;
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }

@@ -32,6 +32,8 @@ pub struct Session<'a> {
     renderer: Renderer<'a>,
     pixels: f64,
     next_step: u32,
+    /// Steps per direct-light estimate (`RenderOptions::window_steps`).
+    window_steps: u32,
     pub first_shot: Option<FirstShotStats>,
     pub pairs: u32,
 }
@@ -47,6 +49,7 @@ impl<'a> Session<'a> {
             renderer,
             pixels: options.width as f64 * options.height as f64,
             next_step: 0,
+            window_steps: options.window_steps.max(1),
             pairs: first_shot.as_ref().map_or(0, |f| f.pairs),
             first_shot,
         })
@@ -91,11 +94,13 @@ impl<'a> Session<'a> {
         Ok(out)
     }
 
-    /// One step, stage by stage; then the fragments it produced. The first entry, `idle`,
-    /// is an empty submission: the round trip that every other entry's wall time includes.
+    /// One step that estimates the direct light too (the next of every `window_steps`), so
+    /// that every stage is timed, stage by stage; then the fragments it produced. The first
+    /// entry, `idle`, is an empty submission: the round trip that every other entry's wall
+    /// time includes.
     pub fn profile_step(&mut self, timer: &StageTimer) -> Result<(Vec<StageTime>, u64)> {
-        let k = self.next_step;
-        self.next_step += 1;
+        let k = self.next_step.div_ceil(self.window_steps) * self.window_steps;
+        self.next_step = k + 1;
         let idle: Vec<Stage> = vec![(IDLE, Box::new(|_: &mut wgpu::CommandEncoder| {}))];
         let times = self.renderer.profile_step(k, timer, idle)?;
         Ok((times, self.renderer.fragments()?))
@@ -180,11 +185,11 @@ pub fn stage_bytes(stage: &str, s: Sizes) -> f64 {
         // 512^2 texels a light; 0 without area lights): a floor, the faces are not counted.
         "light_windows" => s.patches * vertex,
         // Per pixel: id, patch, material, per light a face (112 bytes), 4 texels and up to
-        // 4 triangles (48 bytes each) of the window, the gather's line offsets and 4
-        // fragments with their patches' planes and one O, the running sum read and written.
-        "estimate" => {
-            s.pixels * (4.0 + patch + material + 112.0 + 16.0 + 4.0 * 48.0 + 8.0 + 4.0 * (8.0 + 16.0) + 16.0 + 32.0)
-        }
+        // 4 triangles (48 bytes each) of the window, the running sum read and written.
+        "direct" => s.pixels * (4.0 + patch + material + 112.0 + 16.0 + 4.0 * 48.0 + 32.0),
+        // Per pixel: id, patch, material, the line's offsets and 4 fragments with their
+        // patches' planes and one O, the running sum read and written.
+        "gather" => s.pixels * (4.0 + patch + material + 8.0 + 4.0 * (8.0 + 16.0) + 16.0 + 32.0),
         _ => f64::NAN,
     }
 }

@@ -22,6 +22,9 @@ pub const SPEC: KernelSpec = KernelSpec {
             read_write::<[f32; 4]>("outgoing"),
             // Bits of the largest O channel (positive floats order like their bits).
             read_write::<u32>("max_bits"),
+            // rgb what the image gathers from j (its diffuse reflection of the mean J of the
+            // image steps so far), w s_j; one writer per patch.
+            read_write::<[f32; 4]>("image_outgoing"),
         ],
         FIRST_SHOT_TABLE_GROUP,
     ],
@@ -41,6 +44,7 @@ impl BundleReflect {
         bundle: &wgpu::Buffer,
         outgoing: &wgpu::Buffer,
         max_bits: &wgpu::Buffer,
+        image_outgoing: &wgpu::Buffer,
     ) -> Self {
         let built = SPEC.build(device);
         BundleReflect {
@@ -55,6 +59,7 @@ impl BundleReflect {
                     ("state", (&scene.state).into()),
                     ("outgoing", outgoing.into()),
                     ("max_bits", max_bits.into()),
+                    ("image_outgoing", image_outgoing.into()),
                 ],
             ),
             table_group: scene.first_shot.bind_group(device, &built.layouts[1], &scene.samples),

@@ -1,6 +1,7 @@
-//! Image estimate (`wgsl/image_estimate.wgsl`): adds one estimate of every camera pixel
-//! (emission, per-pixel direct light, indirect light gathered through the step's bundle) to
-//! the running sum of the image.
+//! Image estimate (`wgsl/image_estimate.wgsl`): adds one estimate of every camera pixel to
+//! the running sums of the image: emission and per-pixel direct light (`record_direct`) to
+//! the first half, the indirect light gathered through the step's bundle (`record_gather`)
+//! to the second. The image is the sum of the two halves' means (`read_mean`).
 
 use crate::direct_light::DirectLights;
 use crate::gpu::bindings::{Kernel, KernelSpec, compute, read, read_write, uint_texture, uniform};
@@ -15,7 +16,7 @@ pub const SPEC: KernelSpec = KernelSpec {
     stem: "image_estimate",
     visibility: wgpu::ShaderStages::COMPUTE,
     // One invocation per pixel.
-    entry_points: &[compute("main", [8, 8, 1])],
+    entry_points: &[compute("direct", [8, 8, 1]), compute("gather", [8, 8, 1])],
     groups: &[
         &[
             uniform::<GpuCamera>("camera"),
@@ -24,7 +25,8 @@ pub const SPEC: KernelSpec = KernelSpec {
             uint_texture("item_buffer"),
             read::<GpuPatch>("patches"),
             read::<GpuMaterial>("materials"),
-            // One pixel per invocation: no race.
+            // Two halves (Le + D, G) of rgb sum, w count per pixel; one pixel per
+            // invocation: no race.
             read_write::<[f32; 4]>("image_sum"),
         ],
         // The direct light (`direct_light::DirectLights`).
@@ -43,16 +45,18 @@ pub const SPEC: KernelSpec = KernelSpec {
             read::<u32>("offsets"),
             // (depth bits, patch | FRAGMENT_FRONT_BIT), each line sorted by depth.
             read::<[u32; 2]>("fragments"),
-            // O_j of this step.
-            read::<[f32; 4]>("outgoing"),
+            // What each patch sends the image this step (`bundle_reflect`'s image_outgoing).
+            read::<[f32; 4]>("image_outgoing"),
         ],
     ],
 };
 
-/// Pipeline, parameters and the image sum (vec4<f32> per pixel: rgb sum, w count).
+/// Pipelines, parameters and the image sum (two halves of vec4<f32> per pixel: rgb sum,
+/// w count; Le + D, then G).
 pub struct ImageEstimate {
     built: Kernel,
-    pipeline: wgpu::ComputePipeline,
+    direct_pipeline: wgpu::ComputePipeline,
+    gather_pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     direct_group: wgpu::BindGroup,
     gather_group: wgpu::BindGroup,
@@ -72,7 +76,8 @@ impl ImageEstimate {
         gather: Option<&GatherBuffers>,
     ) -> Self {
         let built = SPEC.build(device);
-        let pipeline = built.compute_pipeline(device, "main");
+        let direct_pipeline = built.compute_pipeline(device, "direct");
+        let gather_pipeline = built.compute_pipeline(device, "gather");
         let params = buffers::uniform(
             device,
             "firstshot.image_estimate.params",
@@ -82,7 +87,7 @@ impl ImageEstimate {
         let image_sum = buffers::storage_zeroed(
             device,
             "firstshot.image_estimate.image_sum",
-            pixels * 16,
+            2 * pixels * 16,
             wgpu::BufferUsages::COPY_SRC,
         );
         let bind_group = built.bind_group(
@@ -110,7 +115,8 @@ impl ImageEstimate {
         let gather_group = Self::gather_group(device, &built, gather);
         ImageEstimate {
             built,
-            pipeline,
+            direct_pipeline,
+            gather_pipeline,
             bind_group,
             direct_group,
             gather_group,
@@ -121,11 +127,11 @@ impl ImageEstimate {
         }
     }
 
-    /// Group 2; without an iteration, placeholders that a pass with `gather` 0 never reads.
+    /// Group 2; without an iteration, placeholders that `direct` never reads.
     fn gather_group(device: &wgpu::Device, built: &Kernel, gather: Option<&GatherBuffers>) -> wgpu::BindGroup {
         let placeholder;
         let (bundle, offsets, fragments, outgoing) = match gather {
-            Some(g) => (&g.bundle, &g.offsets, &g.fragments, &g.outgoing),
+            Some(g) => (&g.bundle, &g.offsets, &g.fragments, &g.image_outgoing),
             None => {
                 let none = wgpu::BufferUsages::empty();
                 placeholder = [
@@ -136,7 +142,7 @@ impl ImageEstimate {
                     ),
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_offsets", 16, none),
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_fragments", 16, none),
-                    buffers::storage_zeroed(device, "firstshot.image_estimate.no_outgoing", 16, none),
+                    buffers::storage_zeroed(device, "firstshot.image_estimate.no_image_outgoing", 16, none),
                 ];
                 (&placeholder[0], &placeholder[1], &placeholder[2], &placeholder[3])
             }
@@ -148,7 +154,7 @@ impl ImageEstimate {
                 ("bundle", bundle.into()),
                 ("offsets", offsets.into()),
                 ("fragments", fragments.into()),
-                ("outgoing", outgoing.into()),
+                ("image_outgoing", outgoing.into()),
             ],
         )
     }
@@ -158,29 +164,31 @@ impl ImageEstimate {
         self.gather_group = Self::gather_group(device, &self.built, Some(gather));
     }
 
-    /// Records one estimate of every pixel (reads the camera item buffer of this pass).
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        let groups = SPEC.grid("main", [self.width, self.height]);
-        let bind_groups = [&self.bind_group, &self.direct_group, &self.gather_group];
-        kernel::dispatch(encoder, "firstshot.image_estimate.pass", &self.pipeline, &bind_groups, groups);
+    /// Records one estimate of every pixel's emission and direct light, Le + D (reads the
+    /// camera item buffer and the light windows of this pass).
+    pub fn record_direct(&self, encoder: &mut wgpu::CommandEncoder) {
+        self.record(encoder, "direct", &self.direct_pipeline);
     }
 
-    /// What the estimate adds where no surface is, how many direct lights it evaluates, and
-    /// whether it gathers through a bundle.
-    pub fn set_params(
-        &self,
-        queue: &wgpu::Queue,
-        environment: [f32; 3],
-        patch_count: u32,
-        light_count: u32,
-        gather: bool,
-    ) {
+    /// Records one estimate of every pixel's indirect light G, gathered through this step's
+    /// bundle (reads the camera item buffer of this pass).
+    pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
+        self.record(encoder, "gather", &self.gather_pipeline);
+    }
+
+    fn record(&self, encoder: &mut wgpu::CommandEncoder, entry: &str, pipeline: &wgpu::ComputePipeline) {
+        let groups = SPEC.grid(entry, [self.width, self.height]);
+        let bind_groups = [&self.bind_group, &self.direct_group, &self.gather_group];
+        kernel::dispatch(encoder, "firstshot.image_estimate.pass", pipeline, &bind_groups, groups);
+    }
+
+    /// What the estimate adds where no surface is, and how many direct lights it evaluates.
+    pub fn set_params(&self, queue: &wgpu::Queue, environment: [f32; 3], patch_count: u32, light_count: u32) {
         let params = GpuEstimateParams {
             environment: [environment[0], environment[1], environment[2], 0.0],
             patch_count,
             light_count,
-            gather: gather as u32,
-            _pad: 0,
+            _pad: [0; 2],
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
     }
@@ -190,18 +198,29 @@ impl ImageEstimate {
         encoder.clear_buffer(&self.image_sum, 0, None);
     }
 
-    /// Reads the image back as the mean of the estimates, row by row from the top.
+    /// Reads the image back, row by row from the top (`image_of_sums`).
     pub fn read_mean(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<[f32; 3]>> {
         let pixels = self.width as u64 * self.height as u64;
-        let sums: Vec<[f32; 4]> = buffers::read_back(device, queue, &self.image_sum, pixels * 16)?;
-        sums.iter()
-            .map(|s| {
-                if s[3] > 0.0 {
-                    Ok([s[0] / s[3], s[1] / s[3], s[2] / s[3]])
-                } else {
-                    Err(Error::Gpu("the image holds no estimate".into()))
-                }
-            })
-            .collect()
+        let sums: Vec<[f32; 4]> = buffers::read_back(device, queue, &self.image_sum, 2 * pixels * 16)?;
+        image_of_sums(&sums)
     }
+}
+
+/// The image of an image sum (two halves of rgb sum, w count per pixel: Le + D, then G): per
+/// pixel the mean of the first half plus the mean of the second (zero where no step has
+/// gathered yet, as in a direct-light image).
+pub fn image_of_sums(sums: &[[f32; 4]]) -> Result<Vec<[f32; 3]>> {
+    let (direct, gathered) = sums.split_at(sums.len() / 2);
+    let mean = |s: &[f32; 4]| [s[0] / s[3], s[1] / s[3], s[2] / s[3]];
+    direct
+        .iter()
+        .zip(gathered)
+        .map(|(d, g)| {
+            if !(d[3] > 0.0) {
+                return Err(Error::Gpu("the image holds no estimate of the direct light".into()));
+            }
+            let (d, g) = (mean(d), if g[3] > 0.0 { mean(g) } else { [0.0; 3] });
+            Ok([d[0] + g[0], d[1] + g[1], d[2] + g[2]])
+        })
+        .collect()
 }

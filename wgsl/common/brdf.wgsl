@@ -9,18 +9,24 @@ fn brdf(m: Material, n: vec3<f32>, w_in: vec3<f32>, w_out: vec3<f32>) -> vec3<f3
     if (cos_in <= 0.0 || cos_out <= 0.0) {
         return vec3<f32>(0.0);
     }
-    var f = m.diffuse.rgb / PI;
-    let ks = m.specular.rgb;
-    if (m.kind == MATERIAL_PHONG) {
-        let shininess = m.specular.w;
-        let mirror = 2.0 * cos_in * n - w_in;
-        let cos_psi = dot(mirror, w_out);
-        // max(0, cos psi)^n with 0^0 = 1, as Rust's powf gives.
-        var lobe = select(0.0, 1.0, shininess == 0.0);
-        if (cos_psi > 0.0) {
-            lobe = pow(cos_psi, shininess);
-        }
-        f += ks * lobe / max(cos_in, cos_out);
+    return m.diffuse.rgb / PI + brdf_glossy(m, n, w_in, w_out);
+}
+
+// The glossy lobe of the BRDF alone (zero for a diffuse material), for w_in and w_out both
+// above the surface: f = diffuse / pi + brdf_glossy.
+fn brdf_glossy(m: Material, n: vec3<f32>, w_in: vec3<f32>, w_out: vec3<f32>) -> vec3<f32> {
+    if (m.kind != MATERIAL_PHONG) {
+        return vec3<f32>(0.0);
     }
-    return f;
+    let cos_in = dot(n, w_in);
+    let cos_out = dot(n, w_out);
+    let shininess = m.specular.w;
+    let mirror = 2.0 * cos_in * n - w_in;
+    let cos_psi = dot(mirror, w_out);
+    // max(0, cos psi)^n with 0^0 = 1, as Rust's powf gives.
+    var lobe = select(0.0, 1.0, shininess == 0.0);
+    if (cos_psi > 0.0) {
+        lobe = pow(cos_psi, shininess);
+    }
+    return m.specular.rgb * lobe / max(cos_in, cos_out);
 }

@@ -39,6 +39,9 @@ struct LightSample {
 struct PatchState {
     incoming: vec4<f32>,  // rgb J_j
     direction: vec4<f32>, // xyz win_j
+    diffuse: vec4<f32>,   // rgb K_j = J_j - (|n_j . d| - 1/2) Lbar_j, reflected diffusely
+    mean_radiance: vec4<f32>, // rgb Lbar_j, running estimate of the mean incoming radiance
+    diffuse_sum: vec4<f32>, // rgb the sum of K_j over the image steps so far, w their number
 }
 
 // Pinhole camera with this pass's sub-pixel sample (Rust: GpuCamera).
@@ -56,8 +59,8 @@ struct EstimateParams {
     environment: vec4<f32>,
     patch_count: u32,
     light_count: u32,
-    gather: u32,         // 1: gather indirect light through the step's bundle
     _pad0: u32,
+    _pad1: u32,
 }
 
 // A light for the per-pixel direct light of one pass (Rust: GpuDirectLight).
@@ -108,6 +111,7 @@ struct Bundle {
     patch_count: u32,
     capacity: u32,
     use_state: u32,
+    image_step: u32,      // 1 past the burn-in: this step's K joins diffuse_sum
 }
 
 // Which way patch j looks along a bundle: +1 if its front faces +d, else -1 (s_j).
