@@ -424,7 +424,7 @@ impl<'a> Renderer<'a> {
             let jitter = [rng.uniform() as f32, rng.uniform() as f32];
             self.write_camera(jitter);
             let every = self.options.window_steps.max(1);
-            self.direct_due = (k - self.burn_in) % every == 0;
+            self.direct_due = (k - self.burn_in).is_multiple_of(every);
             if self.direct_due {
                 let pass = ((k - self.burn_in) / every) as u64;
                 self.windows_due = self.direct.prepare_pass(queue, pass);

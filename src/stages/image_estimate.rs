@@ -216,7 +216,7 @@ pub fn image_of_sums(sums: &[[f32; 4]]) -> Result<Vec<[f32; 3]>> {
         .iter()
         .zip(gathered)
         .map(|(d, g)| {
-            if !(d[3] > 0.0) {
+            if d[3] <= 0.0 || d[3].is_nan() {
                 return Err(Error::Gpu("the image holds no estimate of the direct light".into()));
             }
             let (d, g) = (mean(d), if g[3] > 0.0 { mean(g) } else { [0.0; 3] });
