@@ -734,3 +734,211 @@ fn test16_out_folder_writes_inside_it() {
         assert!(std::fs::symlink_metadata(dir.join("link-folder")).unwrap().file_type().is_symlink());
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// The contract under random flag values.
+
+use proptest::prelude::*;
+
+/// A value for a numeric flag: every magnitude and sign, NaN and the infinities, integers
+/// past every width, and text that is no number at all. Small valid values are there too,
+/// so that some runs reach the GPU; valid values of the middle magnitudes (a 10000-pixel
+/// image, a patch size that makes millions of patches) are left to the range tests, as
+/// they would make a case cost minutes.
+fn number() -> impl Strategy<Value = String> {
+    prop_oneof![
+        1 => any::<f64>().prop_map(|v| format!("{v}")),
+        1 => any::<f64>().prop_map(|v| format!("{v:e}")),
+        1 => any::<i64>().prop_map(|v| v.to_string()),
+        1 => any::<u64>().prop_map(|v| v.to_string()),
+        1 => (-400i32..400, any::<bool>()).prop_map(|(e, negative)| format!("{}1e{e}", if negative { "-" } else { "" })),
+        1 => ("[-+]?", "[1-9][0-9]{19,60}").prop_map(|(sign, digits)| format!("{sign}{digits}")),
+        3 => (0u32..=32).prop_map(|v| v.to_string()),
+        2 => (50u32..3000).prop_map(|v| format!("{}", v as f64 / 1000.0)),
+        2 => prop::sample::select(vec![
+            "nan", "NaN", "inf", "-inf", "infinity", "-0", "0", "+1", "1e", "", "  ", "0x10", "1_000", "١٢", "½",
+            "4294967295", "4294967296", "18446744073709551616", "-2147483649", "1e-400", "5e-324",
+        ])
+        .prop_map(String::from),
+        1 => "\\PC{0,8}",
+    ]
+}
+
+/// A file name: "o" and then arbitrary Unicode (controls and long names included; not `/`
+/// or NUL, which no file name holds).
+fn name() -> impl Strategy<Value = String> {
+    any::<String>().prop_map(|s| format!("o{}", s.replace(['/', '\0'], "_")))
+}
+
+/// The flags that take values, and what else each may get besides a number.
+const VALUE_FLAGS: [&str; 15] = [
+    "--iterations",
+    "--time",
+    "--seed",
+    "--patch-size",
+    "--hemicube-resolution",
+    "--shadow-resolution",
+    "--bundle-resolution",
+    "--width",
+    "--height",
+    "--direct-passes",
+    "--burn-in",
+    "--window-steps",
+    "--checkpoint-every",
+    "--light-window",
+    "--adapter",
+];
+
+fn flag_value(flag: &'static str) -> BoxedStrategy<String> {
+    match flag {
+        "--light-window" => prop_oneof![Just("hemicube".to_string()), Just("tetrahedron".to_string()), number()].boxed(),
+        "--adapter" => prop_oneof![
+            prop::sample::select(vec!["auto", "cpu", "gpu", "vulkan", "gl", "llvmpipe"]).prop_map(String::from),
+            number()
+        ]
+        .boxed(),
+        _ => number().boxed(),
+    }
+}
+
+/// Inputs each case's folder holds before the run: folders, links to devices, FIFOs.
+fn prepare_inputs(dir: &Path) {
+    std::fs::create_dir(dir.join("dir")).unwrap();
+    std::fs::write(dir.join("file"), b"a file where a folder might be expected").unwrap();
+    symlink("/dev/null", &dir.join("dev.exr"));
+    symlink("/dev/null", &dir.join("null.json"));
+    symlink("/dev/full", &dir.join("full.json"));
+    symlink("/proc/self/fd/1", &dir.join("stdout.json"));
+    mkfifo(&dir.join("fifo.json"));
+    mkfifo(&dir.join("fifo.toml"));
+    std::fs::write(dir.join("empty.toml"), b"").unwrap();
+}
+
+#[derive(Debug, Clone)]
+enum SceneChoice {
+    /// MINIMAL under this name.
+    Named(String),
+    /// One of the prepared inputs, or a device or a missing path.
+    Other(&'static str),
+}
+
+fn scene_choice() -> impl Strategy<Value = SceneChoice> {
+    prop_oneof![
+        6 => name().prop_map(|n| SceneChoice::Named(format!("{n}.toml"))),
+        2 => name().prop_map(SceneChoice::Named),
+        1 => prop::sample::select(vec!["fifo.toml", "dir", "/dev/zero", "/dev/null", "missing.toml", "empty.toml", "file/x.toml"])
+            .prop_map(SceneChoice::Other),
+    ]
+}
+
+fn out_choice() -> impl Strategy<Value = Option<String>> {
+    prop_oneof![
+        3 => Just(None),
+        3 => name().prop_map(Some),
+        1 => name().prop_map(|n| Some(format!("{n}.exr"))),
+        1 => name().prop_map(|n| Some(format!("{n}.png"))),
+        1 => name().prop_map(|n| Some(format!("new/{n}/"))),
+        1 => prop::sample::select(vec!["dir", "dir/", "dev", "", "file/x", "fifo.json", "null.json"]).prop_map(|s| Some(s.to_string())),
+    ]
+}
+
+fn stats_choice() -> impl Strategy<Value = Option<String>> {
+    prop_oneof![
+        3 => Just(None),
+        2 => name().prop_map(Some),
+        2 => prop::sample::select(vec![
+            "dir", "null.json", "full.json", "stdout.json", "fifo.json", "", "file/s.json", "fifo.toml", "dev.exr",
+            "s.json",
+        ])
+        .prop_map(|s| Some(s.to_string())),
+    ]
+}
+
+#[derive(Debug, Clone)]
+struct Case {
+    scene: SceneChoice,
+    flags: Vec<(&'static str, String)>,
+    out: Option<String>,
+    stats: Option<String>,
+    switches: Vec<&'static str>,
+}
+
+fn case() -> impl Strategy<Value = Case> {
+    let flags = prop::collection::vec(prop::sample::select(VALUE_FLAGS.to_vec()), 0..3)
+        .prop_flat_map(|names| names.into_iter().map(|f| (Just(f), flag_value(f))).collect::<Vec<_>>());
+    let switches = prop::collection::vec(
+        prop::sample::select(vec!["--quiet", "--quiet", "--no-first-shot", "--resume", "--list-adapters"]),
+        0..2,
+    );
+    (scene_choice(), flags, out_choice(), stats_choice(), switches)
+        .prop_map(|(scene, flags, out, stats, switches)| Case { scene, flags, out, stats, switches })
+}
+
+/// Fast defaults, each replaced by the case's own value of that flag: a case that passes
+/// every check renders a 16 x 16 image in a fraction of a second.
+const DEFAULTS: [(&str, &str); 6] = [
+    ("--width", "16"),
+    ("--height", "16"),
+    ("--hemicube-resolution", "16"),
+    ("--bundle-resolution", "32"),
+    ("--iterations", "2"),
+    ("--time", "20"),
+];
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(150))]
+
+    /// Random flag values, names and inputs: exit 0, 1, 2 (or 130), never a panic or a
+    /// hang, nothing written with 2, no temporary file left, an image with 0.
+    #[test]
+    fn test17_random_flags_keep_the_contract(case in case()) {
+        static COUNT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let n = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir = Scratch::new("hardening", &format!("contract-{n}"));
+        prepare_inputs(&dir);
+        let scene = match &case.scene {
+            SceneChoice::Named(name) => {
+                std::fs::write(dir.join(name), MINIMAL).ok();
+                name.clone()
+            }
+            SceneChoice::Other(path) => path.to_string(),
+        };
+        let mut args: Vec<String> = vec![scene];
+        for (flag, default) in DEFAULTS {
+            if !case.flags.iter().any(|(f, _)| *f == flag) {
+                args.extend([flag.to_string(), default.to_string()]);
+            }
+        }
+        let mut seen = std::collections::HashSet::new();
+        for (flag, value) in &case.flags {
+            // `--flag=value`, so that a value starting with `-` is a value; twice the same
+            // flag is clap's refusal, which the contract covers too, but rarely worth a case.
+            if seen.insert(*flag) {
+                args.push(format!("{flag}={value}"));
+            }
+        }
+        if let Some(out) = &case.out {
+            args.push(format!("--out={out}"));
+        }
+        if let Some(stats) = &case.stats {
+            args.push(format!("--stats={stats}"));
+        }
+        args.extend(case.switches.iter().map(|s| s.to_string()));
+
+        let before = listing(&dir);
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = run(&dir, &refs);
+        let what = format!("{args:?}");
+        assert_contract(&o, &dir, &what);
+        let after = listing(&dir);
+        match o.status.code() {
+            Some(2) => prop_assert_eq!(&after, &before, "{} wrote on a refusal; stderr:\n{}", what, stderr(&o)),
+            Some(0) if !case.switches.contains(&"--list-adapters") => {
+                let new: Vec<&String> = after.iter().filter(|p| !before.contains(p)).collect();
+                prop_assert!(new.iter().any(|p| p.ends_with(".exr")) && new.iter().any(|p| p.ends_with(".png")),
+                    "{} succeeded without an image: {:?}", what, new);
+            }
+            _ => {}
+        }
+    }
+}
