@@ -84,7 +84,7 @@ impl Checkpoint {
     /// (the image sum's fourth component, one per image step) must be `step - burn_in`.
     /// A refusal names the file (exit status 2), instead of a GPU failure later.
     pub fn check_numbers(&self, path: &Path, burn_in: u32) -> Result<()> {
-        if self.state.len() % 4 != 0 || self.image_sum.len() % 16 != 0 {
+        if !self.state.len().is_multiple_of(4) || !self.image_sum.len().is_multiple_of(16) {
             return Err(corrupt(path, "its arrays are not whole numbers"));
         }
         let floats = |bytes: &[u8]| -> Vec<f32> {
@@ -101,7 +101,10 @@ impl Checkpoint {
             return Err(corrupt(path, "its image holds numbers that are not finite"));
         }
         if sum.chunks_exact(4).any(|p| p[3] != image_steps as f32) {
-            return Err(corrupt(path, &format!("its image's weights are not the {image_steps} image steps of step {}", self.step)));
+            return Err(corrupt(
+                path,
+                &format!("its image's weights are not the {image_steps} image steps of step {}", self.step),
+            ));
         }
         Ok(())
     }

@@ -55,11 +55,8 @@ pub fn read_input(path: &Path) -> std::result::Result<Vec<u8>, ReadError> {
     }
     // O_NONBLOCK only matters for FIFOs and devices (opening a FIFO blocks until a writer
     // comes); reads of a regular file ignore it.
-    let mut file = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NONBLOCK)
-        .open(path)
-        .map_err(ReadError::Io)?;
+    let mut file =
+        std::fs::OpenOptions::new().read(true).custom_flags(libc::O_NONBLOCK).open(path).map_err(ReadError::Io)?;
     let metadata = file.metadata().map_err(ReadError::Io)?;
     if let Some(what) = not_a_file(&metadata) {
         return Err(ReadError::NotAFile(what));

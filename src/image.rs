@@ -87,15 +87,15 @@ impl Image {
             .no_deep_data()
             .largest_resolution_level()
             .rgba_channels(
-            |resolution, _| self::Image {
-                width: resolution.width() as u32,
-                height: resolution.height() as u32,
-                pixels: vec![[0.0; 3]; resolution.width() * resolution.height()],
-            },
-            |img: &mut self::Image, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                let w = img.width as usize;
-                img.pixels[pos.y() * w + pos.x()] = [r, g, b];
-            },
+                |resolution, _| self::Image {
+                    width: resolution.width() as u32,
+                    height: resolution.height() as u32,
+                    pixels: vec![[0.0; 3]; resolution.width() * resolution.height()],
+                },
+                |img: &mut self::Image, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                    let w = img.width as usize;
+                    img.pixels[pos.y() * w + pos.x()] = [r, g, b];
+                },
             )
             .first_valid_layer()
             .all_attributes()

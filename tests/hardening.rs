@@ -140,7 +140,8 @@ fn test01_durations_of_every_magnitude_are_checked() {
 #[test]
 fn test02_exr_attributes_in_any_script_are_written() {
     let image = Image::new(2, 1, vec![[0.5, 0.25, 1.0]; 2]);
-    for value in ["日本/シーン.toml", "😀 emoji.toml", "line\nbreak", "back\\slash", "Ünïcödé é", "\u{fffd}"] {
+    for value in ["日本/シーン.toml", "😀 emoji.toml", "line\nbreak", "back\\slash", "Ünïcödé é", "\u{fffd}"]
+    {
         let bytes = image.exr_bytes(&[("firstshot.scene", value.to_string())]).expect(value);
         assert!(!bytes.is_empty());
     }
@@ -251,12 +252,9 @@ fn test05_inputs_that_are_not_files_are_refused_without_hanging() {
     std::fs::create_dir(dir.join("folder.toml")).unwrap();
     let fifo_s = fifo.display().to_string();
     let folder_s = dir.join("folder.toml").display().to_string();
-    for (scene, what) in [
-        (fifo_s.as_str(), "FIFO"),
-        ("/dev/zero", "device"),
-        ("/dev/null", "device"),
-        (folder_s.as_str(), "folder"),
-    ] {
+    for (scene, what) in
+        [(fifo_s.as_str(), "FIFO"), ("/dev/zero", "device"), ("/dev/null", "device"), (folder_s.as_str(), "folder")]
+    {
         let err = refused(&dir, &[scene, "--out", "o/x"]);
         assert!(err.contains(scene) && err.contains(what), "{scene}: {err}");
     }
@@ -373,7 +371,10 @@ fn test07_stats_into_devices_pipes_and_links() {
     let dir = Scratch::new("hardening", "stats-targets");
     let scene = minimal_scene(&dir, "s.toml");
     let render = |stats: &str, out: &str| {
-        let o = run(&dir, &[&[scene.as_str()], &TINY[..], &["--iterations", "2", "--quiet", "--out", out, "--stats", stats]].concat());
+        let o = run(
+            &dir,
+            &[&[scene.as_str()], &TINY[..], &["--iterations", "2", "--quiet", "--out", out, "--stats", stats]].concat(),
+        );
         assert_contract(&o, &dir, stats);
         assert_eq!(o.status.code(), Some(0), "--stats {stats}: {}", stderr(&o));
         o
@@ -492,8 +493,12 @@ fn test10_a_time_limit_too_short_for_one_step_gives_the_direct_image() {
     let started = Instant::now();
     let o = run(
         &dir,
-        &[&[scene.as_str()], &TINY[..], &["--iterations", "0", "--direct-passes", "1048576", "--time", "0.5", "--stats", "d.json", "--quiet"]]
-            .concat(),
+        &[
+            &[scene.as_str()],
+            &TINY[..],
+            &["--iterations", "0", "--direct-passes", "1048576", "--time", "0.5", "--stats", "d.json", "--quiet"],
+        ]
+        .concat(),
     );
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(started.elapsed() < Duration::from_secs(60), "the time limit bounds the passes");
@@ -621,9 +626,15 @@ fn test13_stop_signals_write_image_stats_and_checkpoint() {
     let dir = Scratch::new("hardening", "signals");
     let scene = minimal_scene(&dir, "s.toml");
     let base = |out: &str| -> Vec<String> {
-        [&[scene.as_str()], &TINY[..], &["--burn-in", "2", "--out", out]].concat().iter().map(|s| s.to_string()).collect()
+        [&[scene.as_str()], &TINY[..], &["--burn-in", "2", "--out", out]]
+            .concat()
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
     };
-    for (sig, name, status) in [(libc::SIGTERM, "SIGTERM", 143), (libc::SIGHUP, "SIGHUP", 129), (libc::SIGINT, "SIGINT", 130)] {
+    for (sig, name, status) in
+        [(libc::SIGTERM, "SIGTERM", 143), (libc::SIGHUP, "SIGHUP", 129), (libc::SIGINT, "SIGINT", 130)]
+    {
         let out = name.to_lowercase();
         let mut args = base(&out);
         args.extend(["--iterations", "1000000", "--stats", &format!("{out}.json")].map(String::from));
@@ -653,7 +664,8 @@ fn test13_stop_signals_write_image_stats_and_checkpoint() {
             whole.extend(["--iterations", &total, "--quiet"].map(String::from));
             let refs: Vec<&str> = whole.iter().map(String::as_str).collect();
             assert_eq!(run(&dir, &refs).status.code(), Some(0));
-            let (a, b) = (std::fs::read(dir.join(format!("{out}.exr"))).unwrap(), std::fs::read(dir.join("whole.exr")).unwrap());
+            let (a, b) =
+                (std::fs::read(dir.join(format!("{out}.exr"))).unwrap(), std::fs::read(dir.join("whole.exr")).unwrap());
             assert!(a == b, "the resumed image differs from the uninterrupted one");
         }
     }
@@ -670,8 +682,12 @@ fn test14_stop_signals_end_a_direct_light_image() {
     for (sig, status) in [(libc::SIGINT, 130), (libc::SIGTERM, 143)] {
         let out = format!("d{status}");
         let stats = format!("{out}.json");
-        let args = [&[scene.as_str()], &TINY[..], &["--iterations", "0", "--direct-passes", "1048576", "--out", &out, "--stats", &stats]]
-            .concat();
+        let args = [
+            &[scene.as_str()],
+            &TINY[..],
+            &["--iterations", "0", "--direct-passes", "1048576", "--out", &out, "--stats", &stats],
+        ]
+        .concat();
         let (child, rx) = spawn_until_first_shot(&dir, &args);
         std::thread::sleep(Duration::from_millis(300));
         signal(&child, sig);
@@ -791,7 +807,9 @@ const VALUE_FLAGS: [&str; 15] = [
 
 fn flag_value(flag: &'static str) -> BoxedStrategy<String> {
     match flag {
-        "--light-window" => prop_oneof![Just("hemicube".to_string()), Just("tetrahedron".to_string()), number()].boxed(),
+        "--light-window" => {
+            prop_oneof![Just("hemicube".to_string()), Just("tetrahedron".to_string()), number()].boxed()
+        }
         "--adapter" => prop_oneof![
             prop::sample::select(vec!["auto", "cpu", "gpu", "vulkan", "gl", "llvmpipe"]).prop_map(String::from),
             number()

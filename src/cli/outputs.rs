@@ -88,9 +88,7 @@ fn existing(path: &Path, what: &str) -> Result<Existing, Error> {
         match std::fs::metadata(path) {
             Ok(m) => m,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                return Err(refuse(format!(
-                    "{what}: a symbolic link to nothing; remove it or point it at a file"
-                )));
+                return Err(refuse(format!("{what}: a symbolic link to nothing; remove it or point it at a file")));
             }
             Err(e) => return Err(os_failure(path, e)),
         }
@@ -98,9 +96,7 @@ fn existing(path: &Path, what: &str) -> Result<Existing, Error> {
         link
     };
     match not_a_file(&target) {
-        None if is_link => {
-            Ok(Existing::File(std::fs::canonicalize(path).map_err(|e| os_failure(path, e))?))
-        }
+        None if is_link => Ok(Existing::File(std::fs::canonicalize(path).map_err(|e| os_failure(path, e))?)),
         None => Ok(Existing::File(path.to_path_buf())),
         Some("a folder") => Err(refuse(format!("{what}: is a folder; give a file name, or remove the folder"))),
         Some(other) => Ok(Existing::Stream(other)),
@@ -123,13 +119,14 @@ fn image_output(path: &Path, what: &str) -> Result<PathBuf, Error> {
 fn open_stream(path: &Path) -> Result<File, Error> {
     use std::os::fd::AsRawFd as _;
     use std::os::unix::fs::OpenOptionsExt as _;
-    let file = std::fs::OpenOptions::new()
-        .write(true)
-        .custom_flags(libc::O_NONBLOCK)
-        .open(path)
-        .map_err(|e| match e.raw_os_error() {
-            Some(libc::ENXIO) => os_failure(path, std::io::Error::other("a FIFO that no one reads (start the reader first)")),
-            _ => os_failure(path, e),
+    let file =
+        std::fs::OpenOptions::new().write(true).custom_flags(libc::O_NONBLOCK).open(path).map_err(|e| {
+            match e.raw_os_error() {
+                Some(libc::ENXIO) => {
+                    os_failure(path, std::io::Error::other("a FIFO that no one reads (start the reader first)"))
+                }
+                _ => os_failure(path, e),
+            }
         })?;
     // Blocking again for the write itself: a pipe's reader may be slower than we are.
     // SAFETY: fcntl on a descriptor this function owns, with flags read from it.
@@ -196,8 +193,8 @@ fn check_folder(folder: &Path) -> Result<(), Error> {
     for at in prefixes(folder).iter().rev() {
         match std::fs::metadata(at) {
             Ok(m) if m.is_dir() => {
-                let c = std::ffi::CString::new(at.as_os_str().as_encoded_bytes())
-                    .map_err(|e| os_failure(at, e.into()))?;
+                let c =
+                    std::ffi::CString::new(at.as_os_str().as_encoded_bytes()).map_err(|e| os_failure(at, e.into()))?;
                 // SAFETY: a NUL-terminated path that outlives the call.
                 if unsafe { libc::access(c.as_ptr(), libc::W_OK | libc::X_OK) } != 0 {
                     return Err(os_failure(at, std::io::Error::last_os_error()));
@@ -305,7 +302,11 @@ impl OutputPlan {
                 }
             }
             let probe = firstshot::files::temporary_beside(&folder.join("probe"));
-            std::fs::OpenOptions::new().write(true).create_new(true).open(&probe).map_err(|e| os_failure(&folder, e))?;
+            std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&probe)
+                .map_err(|e| os_failure(&folder, e))?;
             let _ = std::fs::remove_file(&probe);
         }
         Ok(())

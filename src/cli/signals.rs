@@ -28,9 +28,10 @@ impl StopSignals {
         for (signal, name) in STOP_SIGNALS {
             // In this order, for each delivery: a stop already asked for ends the process;
             // otherwise the signal is recorded, then the stop is asked for.
-            let installed = signal_hook::flag::register_conditional_shutdown(signal, 128 + signal, stop.requested.clone())
-                .and_then(|_| signal_hook::flag::register_usize(signal, stop.signal.clone(), signal as usize))
-                .and_then(|_| signal_hook::flag::register(signal, stop.requested.clone()));
+            let installed =
+                signal_hook::flag::register_conditional_shutdown(signal, 128 + signal, stop.requested.clone())
+                    .and_then(|_| signal_hook::flag::register_usize(signal, stop.signal.clone(), signal as usize))
+                    .and_then(|_| signal_hook::flag::register(signal, stop.requested.clone()));
             if let Err(e) = installed {
                 super::io::say(&format!("warning: cannot handle {name} ({e}); it will end the run without writing"));
             }
