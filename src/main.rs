@@ -386,6 +386,11 @@ fn read_resume(
     if !args.resume {
         return Ok(None);
     }
+    if options.iterations == 0 {
+        return Err(usage(
+            "--resume with --iterations 0: a direct-light image has no iteration state to continue; drop one of the two".into(),
+        ));
+    }
     let path = &plan.checkpoint;
     if !path.exists() {
         return Err(usage(format!(
@@ -496,7 +501,7 @@ impl Job<'_> {
         ]
     }
 
-    /// Renders with progress, Ctrl-C and checkpoints, then writes and reports.
+    /// Renders with progress, stop signals and checkpoints, then writes and reports.
     fn render(&self, resume: Option<Checkpoint>) -> Result<(), Failure> {
         let attributes = |steps: u32| self.attributes(steps);
         let mut hooks = CliHooks {

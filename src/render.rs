@@ -171,8 +171,9 @@ pub trait Hooks {
     fn phase(&mut self, _name: &str, _ms: f64) {}
     /// `done` steps so far of `total` (u32::MAX when only a time limit bounds the run).
     fn progress(&mut self, _done: u32, _total: u32) {}
-    /// Asked after every step: stop after it (Ctrl-C). The run then ends as if its step
-    /// count had been reached, with `Rendered::interrupted` set.
+    /// Asked after every step (and every pass of a direct-light image): stop after it (a
+    /// stop signal). The run then ends as if its step count had been reached, with
+    /// `Rendered::interrupted` set.
     fn stop_requested(&self) -> bool {
         false
     }

@@ -427,6 +427,7 @@ fn test08_refusals_make_no_folder() {
         vec![&unknown_key],
         vec![&scene, "--no-first-shot"],
         vec![&scene, "--resume"],
+        vec![&scene, "--resume", "--iterations", "0"],
         vec![&scene, "--time", "1e300"],
         vec![&scene, "--direct-passes", "4294967295"],
     ];
