@@ -385,6 +385,22 @@ fn test07_stats_into_devices_pipes_and_links() {
     let o = render("stdout.json", "a");
     let json: serde_json::Value = serde_json::from_str(&stdout(&o)).expect("the stats on stdout");
     assert_eq!(json["iterations"], 2);
+    // Stdout redirected to a file that holds more than the stats (as `> log 2>&1` does):
+    // the JSON is added where the stream stands, the file is not replaced.
+    let log = dir.join("log.txt");
+    let mut handle = std::fs::File::create(&log).unwrap();
+    std::io::Write::write_all(&mut handle, b"before\n").unwrap();
+    let inode = std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(&log).unwrap());
+    let args =
+        [&[scene.as_str()], &TINY[..], &["--iterations", "2", "--quiet", "--out", "e", "--stats", "stdout.json"]]
+            .concat();
+    let child = command(&dir, &args).stdout(Stdio::from(handle)).stderr(Stdio::piped()).spawn().unwrap();
+    let o = wait_within(child, "--stats to stdout redirected to a file");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&log).unwrap();
+    let json = text.strip_prefix("before\n").unwrap_or_else(|| panic!("the file was replaced:\n{text}"));
+    assert_eq!(serde_json::from_str::<serde_json::Value>(json).expect("the stats after the line")["iterations"], 2);
+    assert_eq!(std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(&log).unwrap()), inode, "the same file");
     // A device.
     symlink("/dev/null", &dir.join("null.json"));
     render("null.json", "b");

@@ -43,8 +43,8 @@ pub fn exr_path(out: Option<&Path>, scene: &Path) -> Result<PathBuf, Error> {
 }
 
 /// Where `--stats` goes: a file replaced through a temporary file and a rename, or, for
-/// an existing device or pipe (`/dev/stdout`, `/dev/null`, a FIFO with a reader), the
-/// stream itself, opened now and written in place.
+/// an existing device or pipe (`/dev/null`, a FIFO with a reader) or one of this process's
+/// own descriptors (`/dev/stdout`), the stream itself, opened now and written in place.
 pub enum StatsTarget {
     File(PathBuf),
     Stream { path: PathBuf, file: File },
@@ -137,6 +137,41 @@ fn open_stream(path: &Path) -> Result<File, Error> {
         }
     }
     Ok(file)
+}
+
+/// The descriptor `path` names if it is one of this process's own (`/dev/stdout`,
+/// `/dev/stderr`, `/dev/fd/N`, `/proc/self/fd/N`, directly or through links): written there
+/// in place, as a shell's `> file` expects (the file is appended to at the shell's offset,
+/// not replaced by a new one).
+fn own_descriptor(path: &Path) -> Option<i32> {
+    let named = |p: &Path| -> Option<i32> {
+        let s = p.to_str()?;
+        s.strip_prefix("/dev/fd/").or_else(|| s.strip_prefix("/proc/self/fd/"))?.parse().ok()
+    };
+    let mut at = path.to_path_buf();
+    // A bound on the links followed, as the system's own (40).
+    for _ in 0..40 {
+        if let Some(fd) = named(&at) {
+            return Some(fd);
+        }
+        let target = std::fs::read_link(&at).ok()?;
+        at = match at.parent() {
+            Some(dir) if target.is_relative() => dir.join(target),
+            _ => target,
+        };
+    }
+    None
+}
+
+/// A writable copy of this process's descriptor `fd`.
+fn duplicate(path: &Path, fd: i32) -> Result<File, Error> {
+    use std::os::fd::FromRawFd as _;
+    // SAFETY: dup returns a new descriptor that only the File below owns.
+    let copy = unsafe { libc::fcntl(fd, libc::F_DUPFD_CLOEXEC, 0) };
+    if copy < 0 {
+        return Err(os_failure(path, std::io::Error::last_os_error()));
+    }
+    Ok(unsafe { File::from_raw_fd(copy) })
 }
 
 /// One file, whichever path names it: the same (device, inode) for an existing file,
@@ -243,9 +278,12 @@ impl OutputPlan {
             Some(path) if path.as_os_str().is_empty() => {
                 return Err(refuse("--stats: the path is empty; give a file path such as stats.json".into()));
             }
-            Some(path) => Some(match existing(path, &format!("--stats {}", path.display()))? {
-                Existing::File(p) => StatsTarget::File(p),
-                Existing::Stream(_) => StatsTarget::Stream { path: path.to_path_buf(), file: open_stream(path)? },
+            Some(path) => Some(match (own_descriptor(path), existing(path, &format!("--stats {}", path.display()))?) {
+                (Some(fd), _) => StatsTarget::Stream { path: path.to_path_buf(), file: duplicate(path, fd)? },
+                (None, Existing::File(p)) => StatsTarget::File(p),
+                (None, Existing::Stream(_)) => {
+                    StatsTarget::Stream { path: path.to_path_buf(), file: open_stream(path)? }
+                }
             }),
         };
 
