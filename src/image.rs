@@ -80,6 +80,7 @@ impl Image {
     }
 
     /// Reads the first RGB(A) layer of an EXR file (a regular file: `files::read_input`).
+    /// Every failure is an `Error::Input` naming the file.
     pub fn read_exr(path: &Path) -> Result<Image> {
         use exr::prelude::*;
         let bytes = crate::files::read_named_input(path)?;
@@ -100,7 +101,11 @@ impl Image {
             .first_valid_layer()
             .all_attributes()
             .from_buffered(std::io::Cursor::new(bytes))
-            .map_err(|e| crate::Error::Image { path: path.to_path_buf(), message: e.to_string() })?;
+            // What was read is no EXR this reader takes: the input's fault (exit status 2).
+            .map_err(|e| crate::Error::Input {
+                path: path.to_path_buf(),
+                message: format!("not a readable EXR image ({e})"),
+            })?;
         Ok(image.layer_data.channel_data.pixels)
     }
 

@@ -281,7 +281,9 @@ fn test05_inputs_that_are_not_files_are_refused_without_hanging() {
     assert!(err.contains("run.checkpoint") && err.contains("FIFO"), "{err}");
     Image::new(2, 2, vec![[1.0; 3]; 4]).write_exr(&dir.join("a.exr"), &[]).unwrap();
     let a = dir.join("a.exr").display().to_string();
-    for other in [fifo_s.as_str(), "/dev/zero", folder_s.as_str()] {
+    std::fs::write(dir.join("text.exr"), b"not an image").unwrap();
+    let text = dir.join("text.exr").display().to_string();
+    for other in [fifo_s.as_str(), "/dev/zero", folder_s.as_str(), text.as_str(), "missing.exr"] {
         let err = refused(&dir, &["compare", &a, other]);
         assert!(err.contains(other), "compare {other}: {err}");
     }
