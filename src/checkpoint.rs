@@ -1,16 +1,19 @@
 //! Checkpoints: the complete state of an iteration, so that a run stopped at step k and
-//! resumed gives exactly the image of an uninterrupted run. The state is J_j and win_j of
-//! every patch, the image sum and the step count: step k's random numbers depend only on
-//! (seed, k), so no generator state needs saving.
+//! resumed gives exactly the image of an uninterrupted run. The state is `GpuPatchState` of
+//! every patch, the image sum (its two halves) and the step count: step k's random numbers
+//! depend only on (seed, k), so no generator state needs saving.
 //!
-//! File layout (little endian): magic "FSCKPT01", fingerprint u64, step u32, state length
+//! File layout (little endian): magic "FSCKPT02" (01: before the state's running means and
+//! the image sum's two halves), fingerprint u64, step u32, state length
 //! u64, image-sum length u64, the two byte arrays, then an FNV-1a 64 checksum of all that
 //! precedes it.
 
 use crate::{Error, Result};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"FSCKPT01";
+const MAGIC: &[u8; 8] = b"FSCKPT02";
+/// The first version's magic, refused with a word on why.
+const MAGIC_01: &[u8; 8] = b"FSCKPT01";
 
 /// The iteration state after `step` steps.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -56,6 +59,9 @@ impl Checkpoint {
     /// Parses a checkpoint; `path` only names it in errors.
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Checkpoint> {
         const HEADER: usize = 8 + 8 + 4 + 8 + 8;
+        if bytes.len() >= 8 && &bytes[..8] == MAGIC_01 {
+            return Err(corrupt(path, "it was written by an older firstshot whose iteration state this one cannot continue"));
+        }
         if bytes.len() < HEADER + 8 || &bytes[..8] != MAGIC {
             return Err(corrupt(path, "no firstshot checkpoint header"));
         }
@@ -78,8 +84,45 @@ impl Checkpoint {
         })
     }
 
+    /// Checks what the checksum cannot (it is as easy to recompute as to forge): that the
+    /// numbers are those of a run resumed after `burn_in` steps of the iteration, with a
+    /// direct-light estimate every `window_steps` steps. Every number of the state and of the
+    /// image sum must be finite, and every pixel's weights (the fourth component of its two
+    /// sums, `stages::image_estimate`) must be the direct-light estimates and the image
+    /// steps of `step - burn_in` image steps. A refusal names the file (exit status 2),
+    /// instead of a GPU failure later.
+    pub fn check_numbers(&self, path: &Path, burn_in: u32, window_steps: u32) -> Result<()> {
+        if !self.state.len().is_multiple_of(4) || !self.image_sum.len().is_multiple_of(16) {
+            return Err(corrupt(path, "its arrays are not whole numbers"));
+        }
+        let floats = |bytes: &[u8]| -> Vec<f32> {
+            bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+        };
+        if floats(&self.state).iter().any(|v| !v.is_finite()) {
+            return Err(corrupt(path, "its iteration state holds numbers that are not finite"));
+        }
+        let Some(image_steps) = self.step.checked_sub(burn_in).filter(|&n| n > 0) else {
+            return Err(corrupt(path, &format!("step {} is not past the burn-in of {burn_in} steps", self.step)));
+        };
+        let sum = floats(&self.image_sum);
+        if sum.iter().any(|v| !v.is_finite()) {
+            return Err(corrupt(path, "its image holds numbers that are not finite"));
+        }
+        let (direct, gathered) = sum.split_at(sum.len() / 8 * 4);
+        let direct_passes = image_steps.div_ceil(window_steps.max(1));
+        if direct.chunks_exact(4).any(|p| p[3] != direct_passes as f32)
+            || gathered.chunks_exact(4).any(|p| p[3] != image_steps as f32)
+        {
+            return Err(corrupt(
+                path,
+                &format!("its image's weights are not those of the {image_steps} image steps of step {}", self.step),
+            ));
+        }
+        Ok(())
+    }
+
     pub fn read(path: &Path) -> Result<Checkpoint> {
-        let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        let bytes = crate::files::read_named_input(path)?;
         Checkpoint::from_bytes(path, &bytes)
     }
 
@@ -108,5 +151,40 @@ mod tests {
             b[flip] ^= 0x10;
             assert!(Checkpoint::from_bytes(p, &b).is_err(), "bit flipped at {flip}");
         }
+    }
+
+    /// A forged checkpoint (its checksum recomputed) with numbers no run writes.
+    #[test]
+    fn numbers_a_run_cannot_write_are_refused() {
+        let p = Path::new("x.checkpoint");
+        let pixel = |rgb: f32, w: f32| [rgb, rgb, rgb, w].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>();
+        let good = Checkpoint {
+            fingerprint: 1,
+            step: 12,
+            state: [0.5f32; 8].iter().flat_map(|v| v.to_le_bytes()).collect(),
+            image_sum: [pixel(0.25, 2.0), pixel(3.0, 2.0)].concat(),
+        };
+        good.check_numbers(p, 10, 1).unwrap();
+        let refused = |c: &Checkpoint, burn_in: u32, part: &str| {
+            let e = c.check_numbers(p, burn_in, 1).expect_err(part).to_string();
+            assert!(e.contains("x.checkpoint") && e.contains(part), "{e}");
+            assert!(Checkpoint::from_bytes(p, &c.to_bytes()).is_ok(), "the checksum alone passes it");
+        };
+        refused(&good, 12, "burn-in");
+        refused(&good, 11, "weights");
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut c = good.clone();
+            c.state[4..8].copy_from_slice(&bad.to_le_bytes());
+            refused(&c, 10, "iteration state");
+            let mut c = good.clone();
+            c.image_sum = [pixel(bad, 2.0), pixel(3.0, 2.0)].concat();
+            refused(&c, 10, "image holds");
+            let mut c = good.clone();
+            c.image_sum = [pixel(0.25, bad), pixel(3.0, 2.0)].concat();
+            refused(&c, 10, "image holds");
+        }
+        let mut c = good.clone();
+        c.state.pop();
+        refused(&c, 10, "whole numbers");
     }
 }

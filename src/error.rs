@@ -21,6 +21,10 @@ pub enum Error {
     /// The GPU failed during the run (device lost, out of memory, validation).
     #[error("GPU failure: {0}")]
     Gpu(String),
+    /// An input named by the user (the scene, a checkpoint, an image to compare) cannot be
+    /// read: missing, unreadable, or not a regular file (a folder, a FIFO, a device).
+    #[error("{path}: {message}")]
+    Input { path: PathBuf, message: String },
     /// Reading or writing a file failed.
     #[error("{path}: {source}")]
     Io {
@@ -41,7 +45,7 @@ impl Error {
 
     /// Whether this error is the user's to fix before any work starts (exit status 2).
     pub fn is_usage(&self) -> bool {
-        matches!(self, Error::Scene { .. } | Error::Usage(_) | Error::Limits(_))
+        matches!(self, Error::Scene { .. } | Error::Usage(_) | Error::Limits(_) | Error::Input { .. })
     }
 }
 

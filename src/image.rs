@@ -18,23 +18,22 @@ pub fn luminance(p: [f32; 3]) -> f64 {
     0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64
 }
 
-fn io_error(path: &Path, source: std::io::Error) -> Error {
-    Error::Io { path: path.to_path_buf(), source }
-}
+pub use crate::files::write_atomically;
 
-/// Writes `bytes` to `path` through a temporary file in the same directory.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(format!(".{}.tmp", std::process::id()));
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, bytes).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        io_error(path, e)
-    })?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        io_error(path, e)
-    })
+/// `text` as EXR text, which holds Latin-1 only: every character outside printable ASCII
+/// (and the backslash) becomes `\u{hex}` (`\\`), so that a scene path in any script, or an
+/// adapter's name, can be written (the EXR writer panics on anything else) and read back
+/// without loss (a newline too: newlines separate the `key=value` lines).
+pub fn exr_text(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '\\' => out.push_str("\\\\"),
+            ' '..='~' => out.push(c),
+            _ => out.push_str(&format!("\\u{{{:x}}}", c as u32)),
+        }
+    }
+    out
 }
 
 impl Image {
@@ -60,8 +59,12 @@ impl Image {
         });
         let mut image = exr::image::Image::from_channels((w, self.height as usize), channels);
         if !attributes.is_empty() {
-            let text: String = attributes.iter().map(|(k, v)| format!("{k}={v}\n")).collect();
-            image.attributes.other.insert(Text::from("firstshot"), AttributeValue::Text(Text::from(text.as_str())));
+            let text: String = attributes.iter().map(|(k, v)| exr_text(&format!("{k}={v}")) + "\n").collect();
+            let text = Text::new_or_none(text.as_str()).ok_or_else(|| crate::Error::Image {
+                path: PathBuf::from("<exr>"),
+                message: "the attributes are not Latin-1 text".into(),
+            })?;
+            image.attributes.other.insert(Text::from("firstshot"), AttributeValue::Text(text));
         }
         let mut bytes = std::io::Cursor::new(Vec::new());
         image
@@ -76,22 +79,33 @@ impl Image {
         write_atomically(path, &self.exr_bytes(attributes)?)
     }
 
-    /// Reads the first RGB(A) layer of an EXR file.
+    /// Reads the first RGB(A) layer of an EXR file (a regular file: `files::read_input`).
+    /// Every failure is an `Error::Input` naming the file.
     pub fn read_exr(path: &Path) -> Result<Image> {
         use exr::prelude::*;
-        let image = read_first_rgba_layer_from_file(
-            path,
-            |resolution, _| self::Image {
-                width: resolution.width() as u32,
-                height: resolution.height() as u32,
-                pixels: vec![[0.0; 3]; resolution.width() * resolution.height()],
-            },
-            |img: &mut self::Image, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                let w = img.width as usize;
-                img.pixels[pos.y() * w + pos.x()] = [r, g, b];
-            },
-        )
-        .map_err(|e| crate::Error::Image { path: path.to_path_buf(), message: e.to_string() })?;
+        let bytes = crate::files::read_named_input(path)?;
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .rgba_channels(
+                |resolution, _| self::Image {
+                    width: resolution.width() as u32,
+                    height: resolution.height() as u32,
+                    pixels: vec![[0.0; 3]; resolution.width() * resolution.height()],
+                },
+                |img: &mut self::Image, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                    let w = img.width as usize;
+                    img.pixels[pos.y() * w + pos.x()] = [r, g, b];
+                },
+            )
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(std::io::Cursor::new(bytes))
+            // What was read is no EXR this reader takes: the input's fault (exit status 2).
+            .map_err(|e| crate::Error::Input {
+                path: path.to_path_buf(),
+                message: format!("not a readable EXR image ({e})"),
+            })?;
         Ok(image.layer_data.channel_data.pixels)
     }
 

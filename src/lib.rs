@@ -14,6 +14,7 @@
 pub mod checkpoint;
 pub mod direct_light;
 pub mod error;
+pub mod files;
 pub mod first_shot;
 pub mod scene;
 

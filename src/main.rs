@@ -1,7 +1,12 @@
 //! The `firstshot` command line (docs/CLI.md): parse flags, call the library, report.
 
+mod cli;
+
 use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
+use cli::io::say;
+use cli::outputs::OutputPlan;
+use cli::signals::StopSignals;
 use firstshot::checkpoint::Checkpoint;
 use firstshot::first_shot::LightWindow;
 use firstshot::gpu::context::{AdapterChoice, Context, list_adapters};
@@ -12,9 +17,7 @@ use firstshot::scene;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 #[derive(Parser)]
 #[command(
@@ -43,8 +46,9 @@ struct RenderArgs {
     /// The scene file (TOML, docs/SCENE_FORMAT.md).
     #[arg(required_unless_present = "list_adapters")]
     scene: Option<PathBuf>,
-    /// Image to write, PATH.exr (linear float RGB), and PATH.png (tonemapped sRGB) beside it.
-    /// Default: the scene's file stem in the current directory.
+    /// Image to write, PATH.exr (linear float RGB), and PATH.png (tonemapped sRGB) beside it;
+    /// an existing folder takes SCENE-STEM.exr inside. Default: the scene's file stem in the
+    /// current directory.
     #[arg(long, value_name = "PATH")]
     out: Option<PathBuf>,
     /// Stochastic iterations (ray-bundle steps); 0 = emission and first shot only.
@@ -133,28 +137,16 @@ impl<E: Into<anyhow::Error>> From<E> for Failure {
     }
 }
 
-fn io_failure(path: &Path, e: std::io::Error) -> Failure {
-    Failure { status: 1, error: anyhow::anyhow!("{}: {e}", path.display()) }
-}
-
-/// Fails before any work if the output's directory cannot take a new file.
-fn check_writable(exr: &Path) -> Result<(), Failure> {
-    let probe = exr.with_extension(format!("probe.{}.tmp", std::process::id()));
-    std::fs::write(&probe, b"").map_err(|e| io_failure(exr, e))?;
-    let _ = std::fs::remove_file(&probe);
-    Ok(())
-}
-
 /// Progress (a bar on a terminal, a line every few seconds elsewhere, nothing with
-/// --quiet), Ctrl-C and checkpoints, for `render_with`.
+/// --quiet), stop signals (Ctrl-C, SIGTERM, SIGHUP) and checkpoints, for `render_with`.
 struct CliHooks<'a> {
     quiet: bool,
     bar: Option<indicatif::ProgressBar>,
     last_line: Instant,
     iteration_start: Instant,
     start_step: u32,
-    stop: Arc<AtomicBool>,
-    checkpoint_every: Option<std::time::Duration>,
+    stop: StopSignals,
+    checkpoint_every: Option<Duration>,
     last_checkpoint: Instant,
     checkpoint_path: PathBuf,
     exr_path: PathBuf,
@@ -171,7 +163,7 @@ impl Hooks for CliHooks<'_> {
             if let Some(bar) = &self.bar {
                 bar.println(format!("{name}: {ms:.0} ms"));
             } else {
-                eprintln!("{name}: {ms:.0} ms");
+                say(&format!("{name}: {ms:.0} ms"));
             }
         }
         self.iteration_start = Instant::now();
@@ -202,12 +194,12 @@ impl Hooks for CliHooks<'_> {
         } else if self.last_line.elapsed().as_secs() >= PLAIN_PROGRESS_SECONDS {
             self.last_line = Instant::now();
             let of = if total == u32::MAX { String::new() } else { format!("/{total}") };
-            eprintln!("step {done}{of}, {rate:.1} steps/s, {elapsed:.0} s");
+            say(&format!("step {done}{of}, {rate:.1} steps/s, {elapsed:.0} s"));
         }
     }
 
     fn stop_requested(&self) -> bool {
-        self.stop.load(Ordering::SeqCst)
+        self.stop.requested()
     }
 
     fn checkpoint_due(&mut self) -> bool {
@@ -240,7 +232,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(f) => {
-            eprintln!("error: {:#}", f.error);
+            say(&format!("error: {}", cli::io::describe(&f.error)));
             ExitCode::from(f.status)
         }
     }
@@ -267,41 +259,23 @@ fn compare(a: &Path, b: &Path) -> Result<(), Failure> {
         e.reference_mean[0], e.reference_mean[1], e.reference_mean[2]
     ));
     out.push_str(&format!("pixels counted     {} (2x2 downsampled, lights left out)\n", e.pixels));
-    // A closed pipe (`| head`) is the reader's choice, not a failure of ours.
-    let _ = std::io::Write::write_all(&mut std::io::stdout().lock(), out.as_bytes());
-    Ok(())
+    cli::io::print_stdout(&out).map_err(stdout_failure)
 }
 
-/// `--out` as the EXR path and the PNG path beside it.
-fn output_paths(args: &RenderArgs, scene_path: &Path) -> Result<(PathBuf, PathBuf), Failure> {
-    let exr = match &args.out {
-        Some(out) => match out.extension().and_then(|e| e.to_str()) {
-            Some(e) if e.eq_ignore_ascii_case("exr") => out.clone(),
-            None => out.with_extension("exr"),
-            Some(e) => {
-                return Err(usage(format!(
-                    "--out {}: expected a .exr path (or no extension), not .{e}",
-                    out.display()
-                )));
-            }
-        },
-        None => {
-            let stem = scene_path.file_stem().unwrap_or_default();
-            PathBuf::from(stem).with_extension("exr")
-        }
-    };
-    let png = exr.with_extension("png");
-    Ok((exr, png))
+fn stdout_failure(e: std::io::Error) -> Failure {
+    Failure { status: 1, error: anyhow::anyhow!("writing to standard output: {e}") }
 }
 
-fn print_adapters() {
+fn print_adapters() -> Result<(), Failure> {
     let adapters = list_adapters();
+    let mut out = String::new();
     if adapters.is_empty() {
-        println!("no adapters found");
+        out.push_str("no adapters found\n");
     }
     for a in adapters {
-        println!("{}\t{}\t{}\t{}", a.name, a.backend, a.device_type, a.driver);
+        out.push_str(&format!("{}\t{}\t{}\t{}\n", a.name, a.backend, a.device_type, a.driver));
     }
+    cli::io::print_stdout(&out).map_err(stdout_failure)
 }
 
 /// Progress messages on stderr, none with --quiet.
@@ -313,9 +287,33 @@ struct Say {
 impl Say {
     fn say(self, s: String) {
         if !self.quiet {
-            eprintln!("{s}");
+            say(&s);
         }
     }
+}
+
+/// The most seconds `--time` and `--checkpoint-every` take: about 31 years, far below what
+/// a `Duration` holds, and a round number for the message.
+const MAX_SECONDS: f64 = 1e9;
+
+/// The most passes of a direct-light image: their stratification grid is held in memory.
+const MAX_DIRECT_PASSES: u32 = 1 << 20;
+
+/// A flag's number of seconds as a `Duration`: finite, > 0 and at most `MAX_SECONDS`
+/// (`Duration::from_secs_f64` panics on what it cannot hold).
+fn seconds(flag: &str, value: f64) -> Result<Duration, Failure> {
+    match Duration::try_from_secs_f64(value) {
+        Ok(d) if value > 0.0 && value <= MAX_SECONDS => Ok(d),
+        _ => Err(usage(format!(
+            "{flag} {}: expected a number of seconds > 0 and at most {MAX_SECONDS:e} (e.g. {flag} 60)",
+            short_number(value)
+        ))),
+    }
+}
+
+/// A number for a message: `1e300`, not three hundred digits.
+fn short_number(value: f64) -> String {
+    if value != 0.0 && !(1e-3..1e9).contains(&value.abs()) { format!("{value:e}") } else { format!("{value}") }
 }
 
 /// The scene's render options with the flags applied, each flag checked for its range.
@@ -334,10 +332,7 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
         options.patch_size = v;
     }
     if let Some(t) = args.time {
-        if !(t.is_finite() && t > 0.0) {
-            return Err(usage(format!("--time {t}: expected a number of seconds > 0")));
-        }
-        options.time_limit = Some(std::time::Duration::from_secs_f64(t));
+        options.time_limit = Some(seconds("--time", t)?);
         if args.iterations.is_none() {
             options.iterations = u32::MAX;
         }
@@ -365,8 +360,8 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     options.bundle_resolution = args.bundle_resolution.unwrap_or(options.bundle_resolution);
     options.shadow_resolution = args.shadow_resolution.unwrap_or(options.hemicube_resolution);
     if let Some(v) = args.direct_passes {
-        if v == 0 {
-            return Err(usage("--direct-passes 0: expected at least 1 pass".into()));
+        if !(1..=MAX_DIRECT_PASSES).contains(&v) {
+            return Err(usage(format!("--direct-passes {v}: expected 1 to {MAX_DIRECT_PASSES} passes")));
         }
         options.direct_passes = v;
     }
@@ -380,64 +375,38 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     Ok(options)
 }
 
-/// Makes the output's directory and checks that it takes a file, then reads the checkpoint
-/// to resume from (with --resume), which must belong to this scene and these flags.
-fn prepare_outputs(
+/// The checkpoint to resume from (with --resume): a file at the checkpoint's place that
+/// belongs to this scene and these flags, with numbers a run can write.
+fn read_resume(
     args: &RenderArgs,
-    paths: &OutputPaths,
+    plan: &OutputPlan,
     scene: &scene::Scene,
     options: &RenderOptions,
 ) -> Result<Option<Checkpoint>, Failure> {
-    if let Some(dir) = paths.exr.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| io_failure(dir, e))?;
+    if !args.resume {
+        return Ok(None);
     }
-    check_writable(&paths.exr)?;
-    let checkpoint_path = &paths.checkpoint;
-    let resume = if args.resume {
-        if !checkpoint_path.exists() {
-            return Err(usage(format!(
-                "--resume: no checkpoint at {} (it is written beside --out by --checkpoint-every or Ctrl-C)",
-                checkpoint_path.display()
-            )));
-        }
-        Some(Checkpoint::read(checkpoint_path)?)
-    } else {
-        None
-    };
-    if let Some(c) = &resume
-        && c.fingerprint != firstshot::render::fingerprint(scene, options)
-    {
+    if options.iterations == 0 {
+        return Err(usage(
+            "--resume with --iterations 0: a direct-light image has no iteration state to continue; drop one of the two".into(),
+        ));
+    }
+    let path = &plan.checkpoint;
+    if !path.exists() {
         return Err(usage(format!(
-            "--resume: {} belongs to another scene or other flags (patch size, resolutions, seed, image size, first shot); run with the same ones or without --resume",
-            checkpoint_path.display()
+            "--resume: no checkpoint at {} (it is written beside --out by --checkpoint-every or a stop signal)",
+            path.display()
         )));
     }
-    if let Some(s) = args.checkpoint_every
-        && !(s.is_finite() && s > 0.0)
-    {
-        return Err(usage(format!("--checkpoint-every {s}: expected a number of seconds > 0")));
+    let checkpoint = Checkpoint::read(path)?;
+    if checkpoint.fingerprint != firstshot::render::fingerprint(scene, options) {
+        return Err(usage(format!(
+            "--resume: {} belongs to another scene or other flags (patch size, resolutions, seed, image size, first shot); run with the same ones or without --resume",
+            path.display()
+        )));
     }
-    Ok(resume)
-}
-
-/// The first Ctrl-C sets the flag (the step finishes and everything is written); a second
-/// one quits at once.
-fn install_ctrl_c() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    let _ = ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
-        }
-    });
-    stop
-}
-
-/// Where a render writes: PATH.exr, PATH.png and PATH.checkpoint.
-struct OutputPaths {
-    exr: PathBuf,
-    png: PathBuf,
-    checkpoint: PathBuf,
+    checkpoint.check_numbers(path, firstshot::render::burn_in_steps(scene, options), options.window_steps)?;
+    Ok(Some(checkpoint))
 }
 
 /// Everything a render needs once the flags, the scene and the adapter have been checked.
@@ -448,7 +417,9 @@ struct Job<'a> {
     patches: &'a scene::Patches,
     options: &'a RenderOptions,
     ctx: &'a Context,
-    paths: &'a OutputPaths,
+    paths: &'a OutputPlan,
+    stop: &'a StopSignals,
+    checkpoint_every: Option<Duration>,
     say: Say,
     start: Instant,
     tessellation_ms: f64,
@@ -456,18 +427,21 @@ struct Job<'a> {
 
 fn run(args: RenderArgs) -> Result<(), Failure> {
     if args.list_adapters {
-        print_adapters();
-        return Ok(());
+        return print_adapters();
     }
     let Some(scene_path) = args.scene.clone() else {
         return Err(usage("a scene file is required".into()));
     };
+    // First, so that a stop signal at any later moment is a graceful one.
+    let stop = StopSignals::install();
     let say = Say { quiet: args.quiet };
     let start = Instant::now();
+    // Every check that can refuse comes before any folder is made or file written.
     let scene = scene::load(&scene_path)?;
     let options = render_options(&args, &scene)?;
-    let (exr, png) = output_paths(&args, &scene_path)?;
-    let paths = OutputPaths { checkpoint: exr.with_extension("checkpoint"), exr, png };
+    let checkpoint_every = args.checkpoint_every.map(|s| seconds("--checkpoint-every", s)).transpose()?;
+    let exr = cli::outputs::exr_path(args.out.as_deref(), &scene_path)?;
+    let mut plan = OutputPlan::new(&exr, args.stats.as_deref(), &scene_path)?;
     firstshot::render::check_options(&scene, &options)?;
     say.say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
 
@@ -479,10 +453,15 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         patches.patches.len(),
         patches.samples.len()
     ));
-    let resume = prepare_outputs(&args, &paths, &scene, &options)?;
-
+    let resume = read_resume(&args, &plan, &scene, &options)?;
     let ctx = Context::new(&args.adapter)?;
+    firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
     say.say(format!("adapter: {}", ctx.summary));
+    if stop.requested() {
+        return Err(interrupted(&stop, "before the render began; nothing was written".into()));
+    }
+    plan.make_folders()?;
+
     let job = Job {
         args: &args,
         scene_path: &scene_path,
@@ -490,12 +469,25 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         patches: &patches,
         options: &options,
         ctx: &ctx,
-        paths: &paths,
+        paths: &plan,
+        stop: &stop,
+        checkpoint_every,
         say,
         start,
         tessellation_ms,
     };
-    job.render(resume)
+    let result = job.render(resume);
+    if result.as_ref().is_err_and(|f| f.status == 2) {
+        // A refusal that only the render could find: leave no folder behind either.
+        plan.undo_folders();
+    }
+    result
+}
+
+/// The exit of a run that a stop signal ended: 128 + the signal's number.
+fn interrupted(stop: &StopSignals, when: String) -> Failure {
+    let status = stop.exit_status().unwrap_or(130);
+    Failure { status, error: anyhow::anyhow!("interrupted by {} {when}", stop.name()) }
 }
 
 impl Job<'_> {
@@ -509,9 +501,8 @@ impl Job<'_> {
         ]
     }
 
-    /// Renders with progress, Ctrl-C and checkpoints, then writes and reports.
+    /// Renders with progress, stop signals and checkpoints, then writes and reports.
     fn render(&self, resume: Option<Checkpoint>) -> Result<(), Failure> {
-        let stop = install_ctrl_c();
         let attributes = |steps: u32| self.attributes(steps);
         let mut hooks = CliHooks {
             quiet: self.args.quiet,
@@ -519,8 +510,8 @@ impl Job<'_> {
             last_line: Instant::now(),
             iteration_start: Instant::now(),
             start_step: resume.as_ref().map_or(0, |c| c.step),
-            stop,
-            checkpoint_every: self.args.checkpoint_every.map(std::time::Duration::from_secs_f64),
+            stop: self.stop.clone(),
+            checkpoint_every: self.checkpoint_every,
             last_checkpoint: Instant::now(),
             checkpoint_path: self.paths.checkpoint.clone(),
             exr_path: self.paths.exr.clone(),
@@ -554,9 +545,9 @@ impl Job<'_> {
         let steps = if options.iterations == 0 { 0 } else { stats.iterations };
         rendered.image.write_exr(&paths.exr, &self.attributes(steps))?;
         rendered.image.write_png(&paths.png, rendered.image.auto_exposure())?;
-        if let Some(path) = &self.args.stats {
+        if self.args.stats.is_some() {
             let json = serde_json::to_string_pretty(stats).context("encoding the stats")?;
-            firstshot::image::write_atomically(path, json.as_bytes())?;
+            paths.write_stats(format!("{json}\n").as_bytes())?;
         }
         if stats.iterations > 0 && options.iterations > 0 {
             self.say.say(format!(
@@ -574,13 +565,26 @@ impl Job<'_> {
             t.elapsed().as_secs_f64() * 1e3,
             self.start.elapsed().as_secs_f64() * 1e3
         ));
-        if rendered.interrupted {
+        if options.iterations > 0 && stats.iterations == 0 {
             self.say.say(format!(
-                "interrupted after step {}: continue with the same flags and --resume ({})",
-                stats.iterations,
-                paths.checkpoint.display()
+                "the time limit ended the run before any step reached the image: it holds the direct light ({} of {} passes)",
+                stats.camera_samples, options.direct_passes
             ));
-            return Err(Failure { status: 130, error: anyhow::anyhow!("interrupted") });
+        }
+        if rendered.interrupted {
+            let when = if options.iterations == 0 || stats.iterations == 0 {
+                format!(
+                    "after pass {} of the direct-light image (which averages the passes done; it cannot be resumed)",
+                    stats.camera_samples
+                )
+            } else {
+                format!(
+                    "after step {}: continue with the same flags and --resume ({})",
+                    stats.iterations,
+                    paths.checkpoint.display()
+                )
+            };
+            return Err(interrupted(self.stop, when));
         }
         Ok(())
     }

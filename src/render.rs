@@ -49,7 +49,9 @@ pub struct RenderOptions {
     pub bundle_resolution: u32,
     /// Whether lights are first shot (else area lights are emitters in the iteration).
     pub first_shot: bool,
-    /// Stop the iteration after this much wall time, if given.
+    /// Stop the iteration (or the passes of a direct-light image) after this much wall time
+    /// since the render began, if given. A limit that ends the run before any step reached
+    /// the image (shorter than the first shot or the burn-in) gives a direct-light image.
     pub time_limit: Option<std::time::Duration>,
     /// Initial fragment room of a bundle step; `None` takes the geometric bound, which no
     /// step exceeds. Tests set it small to exercise the overflow-and-redo path.
@@ -169,8 +171,9 @@ pub trait Hooks {
     fn phase(&mut self, _name: &str, _ms: f64) {}
     /// `done` steps so far of `total` (u32::MAX when only a time limit bounds the run).
     fn progress(&mut self, _done: u32, _total: u32) {}
-    /// Asked after every step: stop after it (Ctrl-C). The run then ends as if its step
-    /// count had been reached, with `Rendered::interrupted` set.
+    /// Asked after every step (and every pass of a direct-light image): stop after it (a
+    /// stop signal). The run then ends as if its step count had been reached, with
+    /// `Rendered::interrupted` set.
     fn stop_requested(&self) -> bool {
         false
     }
@@ -191,6 +194,15 @@ pub trait Hooks {
 /// Hooks that watch nothing and never stop.
 pub struct NoHooks;
 impl Hooks for NoHooks {}
+
+/// Steps of the iteration before the first one averaged into the image: `--burn-in`, or
+/// the scene's default; none without an iteration.
+pub fn burn_in_steps(scene: &Scene, options: &RenderOptions) -> u32 {
+    match options.iterations {
+        0 => 0,
+        _ => options.burn_in.unwrap_or_else(|| default_burn_in(scene)),
+    }
+}
 
 /// Identifies a scene and every option that changes the image (not the step count or the
 /// time limit, which a resumed run may change), so a checkpoint is only resumed by the run
@@ -355,10 +367,7 @@ impl<'a> Renderer<'a> {
         };
         let estimate = ImageEstimate::new(device, &buffers, &camera, &direct, iteration.as_ref().map(|i| &i.gather));
         estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count());
-        let burn_in = match options.iterations {
-            0 => 0,
-            _ => options.burn_in.unwrap_or_else(|| default_burn_in(scene)),
-        };
+        let burn_in = burn_in_steps(scene, options);
         Ok(Renderer {
             ctx,
             scene,
@@ -531,20 +540,29 @@ impl<'a> Renderer<'a> {
     pub fn run(mut self, resume: Option<&Checkpoint>, hooks: &mut dyn Hooks) -> Result<Rendered> {
         let image_start = Instant::now();
         let mut iteration_stats = IterationStats::default();
-        let camera_samples = if self.options.iterations == 0 {
-            self.direct_image();
-            self.options.direct_passes
+        let mut direct = DirectImage::default();
+        if self.options.iterations == 0 {
+            direct = self.direct_image(hooks)?;
         } else {
             iteration_stats = self.iterate(resume, hooks)?;
             hooks.phase("iteration", iteration_stats.ms);
-            iteration_stats.steps.saturating_sub(self.burn_in)
+            if iteration_stats.steps <= self.burn_in {
+                // The time limit ended the run before any step reached the image (it was
+                // shorter than the first shot, or than the burn-in): the image is the
+                // direct light instead, without the state of the unfinished burn-in.
+                direct = self.direct_image(hooks)?;
+            }
+        }
+        let camera_samples = match direct.passes {
+            0 => iteration_stats.steps.saturating_sub(self.burn_in),
+            passes => passes,
         };
         let image = self.read_image()?;
         let image_ms = milliseconds(image_start);
         self.ctx.check()?;
         let (o, fs) = (&self.options, self.first_shot.as_ref());
         Ok(Rendered {
-            interrupted: iteration_stats.interrupted,
+            interrupted: iteration_stats.interrupted || direct.interrupted,
             image,
             stats: RenderStats {
                 adapter: self.ctx.summary.clone(),
@@ -580,7 +598,8 @@ impl<'a> Renderer<'a> {
     /// An image without iteration: emission and direct light, averaged over
     /// `direct_passes` passes, each with its own camera sample per pixel (stratified over a
     /// grid of the largest square number of passes) and its own points on the area lights.
-    fn direct_image(&mut self) {
+    /// A stop (`Hooks::stop_requested`) or the time limit ends it after any pass but the first.
+    fn direct_image(&mut self, hooks: &mut dyn Hooks) -> Result<DirectImage> {
         let passes = self.options.direct_passes.max(1);
         let per_axis = (passes as f64).sqrt().floor().max(1.0) as u32;
         let queue = &self.ctx.queue;
@@ -593,6 +612,7 @@ impl<'a> Renderer<'a> {
             let pick = ((shuffle.uniform() * (i + 1) as f64) as usize).min(i);
             order.swap(i, pick);
         }
+        let mut done = DirectImage::default();
         for k in 0..passes {
             // Generators of their own, apart from the steps' (seed, k) streams.
             let mut rng = StepRng::new(self.options.seed, u64::MAX - k as u64);
@@ -604,7 +624,21 @@ impl<'a> Renderer<'a> {
             self.write_camera([jitter[0] as f32, jitter[1] as f32]);
             self.windows_due = self.direct.prepare_pass(queue, k as u64);
             self.submit(&self.image_stages(true, false), "firstshot.render.direct_image");
+            done.passes = k + 1;
+            if done.passes % STEPS_PER_BATCH == 0 {
+                // Waiting now and then keeps the GPU's queue short, so that a stop or the
+                // time limit takes effect within a few passes, not after all that were queued.
+                self.ctx.wait()?;
+            }
+            if done.passes < passes && hooks.stop_requested() {
+                done.interrupted = true;
+                break;
+            }
+            if self.options.time_limit.is_some_and(|limit| self.start.elapsed() >= limit) {
+                break;
+            }
         }
+        Ok(done)
     }
 
     fn checkpoint(&self, step: u32) -> Result<(Checkpoint, Image)> {
@@ -669,11 +703,8 @@ impl<'a> Renderer<'a> {
         let mut interrupted = false;
         let total = options.iterations.saturating_add(self.burn_in);
         while step < total && !interrupted {
-            // A time limit still lets one step into the image, so that there is one.
-            if let Some(limit) = options.time_limit
-                && self.start.elapsed() >= limit
-                && step > self.burn_in
-            {
+            // Past the time limit (even within the burn-in: `run` then makes a direct image).
+            if options.time_limit.is_some_and(|limit| self.start.elapsed() >= limit) {
                 break;
             }
             let batch_start = Instant::now();
@@ -726,6 +757,13 @@ impl<'a> Renderer<'a> {
             interrupted,
         })
     }
+}
+
+/// The passes of a direct-light image that ran, and whether a stop ended them early.
+#[derive(Debug, Default, Clone, Copy)]
+struct DirectImage {
+    passes: u32,
+    interrupted: bool,
 }
 
 #[derive(Debug, Default, Clone, Copy)]

@@ -341,7 +341,8 @@ fn test09_missing_mesh_file() {
 #[test]
 fn test10_scene_file_problems() {
     let missing = load(Path::new("/nonexistent/firstshot/scene.toml"));
-    assert!(matches!(missing, Err(Error::Io { .. })), "{missing:?}");
+    // The user's to fix (exit status 2), naming the file.
+    assert!(matches!(&missing, Err(e @ Error::Input { .. }) if e.is_usage()), "{missing:?}");
     let dir = Scratch::new("scene-load", "bytes");
     let path = dir.join("scene.toml");
     write(&path, b"format = 1\n\xff\xfe\n");

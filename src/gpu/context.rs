@@ -35,6 +35,19 @@ impl std::str::FromStr for AdapterChoice {
     }
 }
 
+/// As written on the command line (`--adapter vulkan`), for messages.
+impl fmt::Display for AdapterChoice {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            AdapterChoice::Auto => write!(f, "auto"),
+            AdapterChoice::Cpu => write!(f, "cpu"),
+            AdapterChoice::Gpu => write!(f, "gpu"),
+            AdapterChoice::Name(name) => write!(f, "{name}"),
+            AdapterChoice::Index(i) => write!(f, "the adapter at position {i} of the list"),
+        }
+    }
+}
+
 /// An adapter as `--list-adapters` and `--stats` report it.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct AdapterSummary {
@@ -181,16 +194,20 @@ impl Context {
                 Err(e) => failures.push(format!("{summary}: {e}")),
             }
         }
-        let found = if found.is_empty() {
-            "none (install a Vulkan driver, e.g. Debian's mesa-vulkan-drivers, or an OpenGL/EGL driver)".to_string()
-        } else {
-            found.join("; ")
-        };
-        let mut message = format!("no adapter fits --adapter {choice:?}; found: {found}");
-        if !failures.is_empty() {
-            message.push_str(&format!("; could not open: {}", failures.join("; ")));
+        // None found is the machine's problem (exit status 1); none that fits, while others
+        // exist, is the choice's (a usage error, exit status 2).
+        if found.is_empty() {
+            return Err(Error::Adapter(format!(
+                "--adapter {choice}: no GPU adapter found; install a Vulkan driver (e.g. Debian's mesa-vulkan-drivers) or an OpenGL/EGL driver"
+            )));
         }
-        Err(Error::Adapter(message))
+        if failures.is_empty() {
+            return Err(Error::Usage(format!(
+                "--adapter {choice}: no adapter fits; found: {}; give auto, cpu, gpu, a backend (vulkan, gl) or part of a name that --list-adapters prints",
+                found.join("; ")
+            )));
+        }
+        Err(Error::Adapter(format!("--adapter {choice}: could not open {}", failures.join("; "))))
     }
 
     pub fn limits(&self) -> wgpu::Limits {

@@ -27,7 +27,7 @@ const SHAPE_TYPES: &str = "\"quad\", \"triangle\", \"mesh\", \"box\" or \"sierpi
 
 /// Loads and validates a scene file. Errors name the file, the key and what was expected.
 pub fn load(path: &Path) -> Result<Scene> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    let bytes = crate::files::read_named_input(path)?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let at = e.utf8_error().valid_up_to();
         let line = 1 + e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count();
@@ -362,12 +362,14 @@ fn mesh(
     materials: &Materials,
 ) -> Result<Vec<Triangle>> {
     let path = t.cx.file.parent().map_or_else(|| PathBuf::from(written), |dir| dir.join(written));
-    let bytes = std::fs::read(&path).map_err(|e| {
-        if e.kind() == std::io::ErrorKind::NotFound {
+    let bytes = crate::files::read_input(&path).map_err(|e| match e {
+        crate::files::ReadError::Io(e) if e.kind() == std::io::ErrorKind::NotFound => {
             file_item.err(format!("mesh file {} does not exist", path.display()))
-        } else {
-            file_item.err(format!("mesh file {} cannot be read: {e}", path.display()))
         }
+        crate::files::ReadError::NotAFile(what) => {
+            file_item.err(format!("mesh file {} is {what}; give the path of an OBJ file", path.display()))
+        }
+        crate::files::ReadError::Io(e) => file_item.err(format!("mesh file {} cannot be read: {e}", path.display())),
     })?;
     // Lossy: stray bytes in comments or names must not hide the line of a real problem.
     let text = String::from_utf8_lossy(&bytes);
