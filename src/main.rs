@@ -36,6 +36,27 @@ enum Command {
     /// Image error of A against B (docs/ALGORITHM.md 3): relative RMSE without the directly seen
     /// lights, ratio of the means, and per-channel means.
     Compare { a: PathBuf, b: PathBuf },
+    /// Adds the parts of a sharded run exactly (docs/DISTRIBUTED.md): writes OUT.exr, OUT.png,
+    /// OUT.part (itself mergeable) and the stats; reports missing shards.
+    Merge(MergeArgs),
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// The merged image, OUT.exr; OUT.png and OUT.part beside it.
+    out: PathBuf,
+    /// Part files of shards or of earlier merges (SHARD.exr stands for the SHARD.part beside it).
+    #[arg(required = true, value_name = "PARTS")]
+    parts: Vec<PathBuf>,
+    /// Statistics JSON (default: OUT.stats.json).
+    #[arg(long, value_name = "PATH")]
+    stats: Option<PathBuf>,
+    /// Refuse (exit 2) if any shard of the run is missing.
+    #[arg(long)]
+    complete: bool,
+    /// No summary line.
+    #[arg(long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -114,6 +135,13 @@ struct RenderArgs {
     /// Continue the run whose checkpoint belongs to --out.
     #[arg(long)]
     resume: bool,
+    /// Render shard K of N (counting from 0) of the run (docs/DISTRIBUTED.md). Default: from
+    /// a Slurm array (SLURM_ARRAY_TASK_ID) or a Kubernetes Indexed Job (JOB_COMPLETION_INDEX).
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
+    /// The number of shards with JOB_COMPLETION_INDEX (else FIRSTSHOT_SHARD_COUNT).
+    #[arg(long, value_name = "N")]
+    shard_count: Option<u32>,
 }
 
 /// A failure and the exit status it maps to (docs/CLI.md: 2 usage or scene error, 1 run failure).
@@ -235,6 +263,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Compare { a, b }) => compare(&a, &b),
+        Some(Command::Merge(m)) => merge(&m),
         None => run(cli.render),
     };
     match result {
@@ -269,6 +298,18 @@ fn compare(a: &Path, b: &Path) -> Result<(), Failure> {
     out.push_str(&format!("pixels counted     {} (2x2 downsampled, lights left out)\n", e.pixels));
     // A closed pipe (`| head`) is the reader's choice, not a failure of ours.
     let _ = std::io::Write::write_all(&mut std::io::stdout().lock(), out.as_bytes());
+    Ok(())
+}
+
+fn merge(m: &MergeArgs) -> Result<(), Failure> {
+    let request = firstshot::merge::MergeRequest {
+        out: &m.out,
+        parts: &m.parts,
+        stats: m.stats.as_deref(),
+        complete: m.complete,
+        quiet: m.quiet,
+    };
+    firstshot::merge::merge_files(&request)?;
     Ok(())
 }
 
@@ -452,6 +493,7 @@ struct Job<'a> {
     say: Say,
     start: Instant,
     tessellation_ms: f64,
+    shard: Option<firstshot::shard::ShardRun>,
 }
 
 fn run(args: RenderArgs) -> Result<(), Failure> {
@@ -465,8 +507,15 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     let say = Say { quiet: args.quiet };
     let start = Instant::now();
     let scene = scene::load(&scene_path)?;
-    let options = render_options(&args, &scene)?;
+    let mut options = render_options(&args, &scene)?;
+    // A shard (docs/DISTRIBUTED.md): its own seed and share of the steps, its own file names.
+    let shard = firstshot::shard::from_cli(args.shard.as_deref(), args.shard_count)?;
+    let shard = shard.map(|s| s.apply(&scene, &mut options)).transpose()?;
     let (exr, png) = output_paths(&args, &scene_path)?;
+    let (exr, png) = match shard {
+        Some(s) => (s.shard.path(&exr), s.shard.path(&png)),
+        None => (exr, png),
+    };
     let paths = OutputPaths { checkpoint: exr.with_extension("checkpoint"), exr, png };
     firstshot::render::check_options(&scene, &options)?;
     say.say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
@@ -494,6 +543,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         say,
         start,
         tessellation_ms,
+        shard,
     };
     job.render(resume)
 }
@@ -554,9 +604,20 @@ impl Job<'_> {
         let steps = if options.iterations == 0 { 0 } else { stats.iterations };
         rendered.image.write_exr(&paths.exr, &self.attributes(steps))?;
         rendered.image.write_png(&paths.png, rendered.image.auto_exposure())?;
+        if let Some(run) = &self.shard {
+            let scene = self.scene_path.display().to_string();
+            let (w, h) = (options.width, options.height);
+            firstshot::merge::Part::of_shard(run, &scene, w, h, &rendered.image_sum, steps)?
+                .write(&paths.exr.with_extension("part"))?;
+        }
         if let Some(path) = &self.args.stats {
-            let json = serde_json::to_string_pretty(stats).context("encoding the stats")?;
-            firstshot::image::write_atomically(path, json.as_bytes())?;
+            let mut json = serde_json::to_value(stats).context("encoding the stats")?;
+            if let (Some(run), Some(map)) = (&self.shard, json.as_object_mut()) {
+                map.insert("shard".into(), firstshot::shard::stats_json(run));
+            }
+            let json = serde_json::to_string_pretty(&json).context("encoding the stats")?;
+            let path = self.shard.map_or(path.clone(), |s| s.shard.path(path));
+            firstshot::image::write_atomically(&path, json.as_bytes())?;
         }
         if stats.iterations > 0 && options.iterations > 0 {
             self.say.say(format!(

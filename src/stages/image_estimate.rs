@@ -190,18 +190,28 @@ impl ImageEstimate {
         encoder.clear_buffer(&self.image_sum, 0, None);
     }
 
+    /// Reads the image sum back (rgb sum, w the number of estimates), row by row from the top.
+    pub fn read_sum(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<[f32; 4]>> {
+        let pixels = self.width as u64 * self.height as u64;
+        buffers::read_back(device, queue, &self.image_sum, pixels * 16)
+    }
+
     /// Reads the image back as the mean of the estimates, row by row from the top.
     pub fn read_mean(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<[f32; 3]>> {
-        let pixels = self.width as u64 * self.height as u64;
-        let sums: Vec<[f32; 4]> = buffers::read_back(device, queue, &self.image_sum, pixels * 16)?;
-        sums.iter()
-            .map(|s| {
-                if s[3] > 0.0 {
-                    Ok([s[0] / s[3], s[1] / s[3], s[2] / s[3]])
-                } else {
-                    Err(Error::Gpu("the image holds no estimate".into()))
-                }
-            })
-            .collect()
+        mean_of(&self.read_sum(device, queue)?)
     }
+}
+
+/// The mean of every pixel's estimates: its rgb sum over its count (in f32, as the image has
+/// always been written; `merge` reproduces it bit for bit from a part).
+pub fn mean_of(sums: &[[f32; 4]]) -> Result<Vec<[f32; 3]>> {
+    sums.iter()
+        .map(|s| {
+            if s[3] > 0.0 {
+                Ok([s[0] / s[3], s[1] / s[3], s[2] / s[3]])
+            } else {
+                Err(Error::Gpu("the image holds no estimate".into()))
+            }
+        })
+        .collect()
 }
