@@ -229,7 +229,14 @@ fn bad_part(path: &Path, what: &str) -> Error {
 impl Part {
     /// The part of a shard's render: its image sum (`Rendered::image_sum`), whose every pixel
     /// holds the same number of estimates.
-    pub fn of_shard(run: &ShardRun, scene: &str, width: u32, height: u32, sums: &[[f32; 4]], iterations: u32) -> Result<Part> {
+    pub fn of_shard(
+        run: &ShardRun,
+        scene: &str,
+        width: u32,
+        height: u32,
+        sums: &[[f32; 4]],
+        iterations: u32,
+    ) -> Result<Part> {
         let samples = sums.first().map_or(0.0, |s| s[3]);
         if sums.len() != width as usize * height as usize || sums.iter().any(|s| s[3] != samples) || samples <= 0.0 {
             return Err(Error::Gpu("the image sum does not hold the same number of estimates in every pixel".into()));
@@ -313,7 +320,8 @@ impl Part {
             return Err(bad_part(path, "its list of shards is not ascending below its shard count"));
         }
         let len = u32_of(take(4)?) as usize;
-        let scene = String::from_utf8(take(len)?.to_vec()).map_err(|_| bad_part(path, "the scene path is not UTF-8"))?;
+        let scene =
+            String::from_utf8(take(len)?.to_vec()).map_err(|_| bad_part(path, "the scene path is not UTF-8"))?;
         let len = u64_of(take(8)?) as usize;
         let values = take(len)?.to_vec();
         if at != body.len() {
@@ -505,7 +513,10 @@ pub fn merge_files(request: &MergeRequest) -> Result<MergeStats> {
         Some(e) if e.eq_ignore_ascii_case("exr") => out.to_path_buf(),
         None => out.with_extension("exr"),
         Some(e) => {
-            return Err(Error::Usage(format!("merge {}: expected a .exr path (or no extension), not .{e}", out.display())));
+            return Err(Error::Usage(format!(
+                "merge {}: expected a .exr path (or no extension), not .{e}",
+                out.display()
+            )));
         }
     };
     let paths: Vec<PathBuf> = request

@@ -71,7 +71,11 @@ fn env_number(env: &dyn Fn(&str) -> Option<String>, name: &str, fix: &str) -> Re
 /// Kubernetes Indexed Job's completion index, with its count from `count_flag`
 /// (`--shard-count`) or `FIRSTSHOT_SHARD_COUNT`; else none (an unsharded run). `env` reads
 /// the environment (a parameter, so that tests need not change the process's).
-pub fn resolve(flag: Option<&str>, count_flag: Option<u32>, env: &dyn Fn(&str) -> Option<String>) -> Result<Option<Shard>> {
+pub fn resolve(
+    flag: Option<&str>,
+    count_flag: Option<u32>,
+    env: &dyn Fn(&str) -> Option<String>,
+) -> Result<Option<Shard>> {
     if let Some(text) = flag {
         let shard = parse_flag(text)?;
         if let Some(n) = count_flag
@@ -99,7 +103,9 @@ pub fn resolve(flag: Option<&str>, count_flag: Option<u32>, env: &dyn Fn(&str) -
         if let Some(n) = count_flag
             && n as u64 != count
         {
-            return Err(usage(format!("--shard-count {n} contradicts SLURM_ARRAY_TASK_COUNT={count}; drop --shard-count")));
+            return Err(usage(format!(
+                "--shard-count {n} contradicts SLURM_ARRAY_TASK_COUNT={count}; drop --shard-count"
+            )));
         }
         return Ok(Some(Shard { index: k as u32, count: count as u32, source: Source::Slurm }));
     }
@@ -269,7 +275,10 @@ mod tests {
             Some(Shard { index: 4, count: 5, source: Source::Kubernetes })
         );
         // The flag wins over both; nothing set: no shard.
-        assert_eq!(resolved(Some("0/1"), None, &slurm).unwrap().map(|s| (s.index, s.count, s.source)), Some((0, 1, Source::Flag)));
+        assert_eq!(
+            resolved(Some("0/1"), None, &slurm).unwrap().map(|s| (s.index, s.count, s.source)),
+            Some((0, 1, Source::Flag))
+        );
         assert_eq!(resolved(None, None, &[]).unwrap(), None);
         assert_eq!(resolved(None, None, &[("FIRSTSHOT_SHARD_COUNT", "4")]).unwrap(), None);
     }
@@ -284,7 +293,10 @@ mod tests {
         let e = message(resolved(None, None, &[("SLURM_ARRAY_TASK_ID", "9"), ("SLURM_ARRAY_TASK_COUNT", "3")]));
         assert!(e.contains("SLURM_ARRAY_TASK_ID=9") && e.contains("--array=0-2"), "{e}");
         let e = message(resolved(None, None, &[("JOB_COMPLETION_INDEX", "1")]));
-        assert!(e.contains("JOB_COMPLETION_INDEX=1") && e.contains("FIRSTSHOT_SHARD_COUNT") && e.contains("--shard-count"), "{e}");
+        assert!(
+            e.contains("JOB_COMPLETION_INDEX=1") && e.contains("FIRSTSHOT_SHARD_COUNT") && e.contains("--shard-count"),
+            "{e}"
+        );
         let e = message(resolved(None, None, &[("JOB_COMPLETION_INDEX", "3"), ("FIRSTSHOT_SHARD_COUNT", "3")]));
         assert!(e.contains("FIRSTSHOT_SHARD_COUNT 3"), "{e}");
         let e = message(resolved(None, Some(0), &[("JOB_COMPLETION_INDEX", "0")]));
