@@ -54,7 +54,8 @@ fn p(path: &Path) -> String {
 fn test01_shard_refusals_exit_2_name_the_cause_and_write_nothing() {
     let scratch = Scratch::new("shards", "refusals");
     let base = small_cornell_args(16);
-    let cases: Vec<(Vec<&str>, Vec<(&str, &str)>, &str)> = vec![
+    type Case<'a> = (Vec<&'a str>, Vec<(&'a str, &'a str)>, &'a str);
+    let cases: Vec<Case> = vec![
         (vec!["--shard", "4/4"], vec![], "--shard 4/4"),
         (vec!["--shard", "1"], vec![], "K/N"),
         (vec!["--shard", "0/0"], vec![], "--shard 0/0"),
@@ -143,9 +144,9 @@ fn test03_merges_are_bit_identical_in_any_order_and_grouping() {
         ok_in(&dir, &args.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
     }
     let bytes = |name: &str| std::fs::read(dir.join(name)).unwrap();
-    for i in 1..orders.len() {
-        assert!(bytes(&format!("m{i}.exr")) == bytes("m0.exr"), "order {:?}: other EXR bytes", orders[i]);
-        assert!(bytes(&format!("m{i}.part")) == bytes("m0.part"), "order {:?}: other part bytes", orders[i]);
+    for (i, order) in orders.iter().enumerate().skip(1) {
+        assert!(bytes(&format!("m{i}.exr")) == bytes("m0.exr"), "order {order:?}: other EXR bytes");
+        assert!(bytes(&format!("m{i}.part")) == bytes("m0.part"), "order {order:?}: other part bytes");
     }
     // A merge of merges: (2 + 0) then 1, and the shards' own .exr names for their parts.
     ok_in(&dir, &["merge", "a.exr", &part(2), "cb.shard-0-of-3.exr", "--quiet"], &[]);
@@ -159,10 +160,10 @@ fn test03_merges_are_bit_identical_in_any_order_and_grouping() {
         (0..3).map(|k| Image::read_exr(&dir.join(format!("cb.shard-{k}-of-3.exr"))).unwrap()).collect();
     let mut worst = 0.0f64;
     for (i, m) in merged.pixels.iter().enumerate() {
-        for c in 0..3 {
+        for (c, &value) in m.iter().enumerate() {
             let mean: f64 =
                 shards.iter().zip(&steps).map(|(s, &n)| s.pixels[i][c] as f64 * n as f64).sum::<f64>() / 10.0;
-            worst = worst.max((m[c] as f64 - mean).abs() / mean.abs().max(1e-3));
+            worst = worst.max((value as f64 - mean).abs() / mean.abs().max(1e-3));
         }
     }
     assert!(worst < 1e-5, "merged pixels stray {worst:e} from the weighted mean of the shards");
