@@ -611,11 +611,14 @@ impl Job<'_> {
                 .write(&paths.exr.with_extension("part"))?;
         }
         if let Some(path) = &self.args.stats {
-            let mut json = serde_json::to_value(stats).context("encoding the stats")?;
-            if let (Some(run), Some(map)) = (&self.shard, json.as_object_mut()) {
-                map.insert("shard".into(), firstshot::shard::stats_json(run));
-            }
-            let json = serde_json::to_string_pretty(&json).context("encoding the stats")?;
+            let json = match &self.shard {
+                None => serde_json::to_string_pretty(stats),
+                Some(run) => serde_json::to_value(stats).and_then(|mut json| {
+                    json["shard"] = firstshot::shard::stats_json(run);
+                    serde_json::to_string_pretty(&json)
+                }),
+            };
+            let json = json.context("encoding the stats")?;
             let path = self.shard.map_or(path.clone(), |s| s.shard.path(path));
             firstshot::image::write_atomically(&path, json.as_bytes())?;
         }
