@@ -60,7 +60,10 @@ impl Checkpoint {
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Checkpoint> {
         const HEADER: usize = 8 + 8 + 4 + 8 + 8;
         if bytes.len() >= 8 && &bytes[..8] == MAGIC_01 {
-            return Err(corrupt(path, "it was written by an older firstshot whose iteration state this one cannot continue"));
+            return Err(corrupt(
+                path,
+                "it was written by an older firstshot whose iteration state this one cannot continue",
+            ));
         }
         if bytes.len() < HEADER + 8 || &bytes[..8] != MAGIC {
             return Err(corrupt(path, "no firstshot checkpoint header"));

@@ -10,6 +10,9 @@
 //!    random global directions between all mutually visible patches.
 //! 4. `stages::image_estimate`: every step adds an estimate of each camera pixel; the image is
 //!    the running mean, written by `image` as EXR + PNG.
+//!
+//! `shard` and `merge` split one run into independent chains on many machines and add their
+//! image sums exactly (docs/DISTRIBUTED.md).
 
 pub mod checkpoint;
 pub mod direct_light;
@@ -17,12 +20,14 @@ pub mod error;
 pub mod files;
 pub mod first_shot;
 pub mod scene;
+pub mod shard;
 
 pub use error::{Error, Result};
 pub mod gpu;
 pub mod image;
 pub mod iteration;
 pub mod layout;
+pub mod merge;
 pub mod render;
 pub mod rng;
 pub mod stages;

@@ -39,6 +39,27 @@ enum Command {
     /// Image error of A against B (docs/ALGORITHM.md 3): relative RMSE without the directly seen
     /// lights, ratio of the means, and per-channel means.
     Compare { a: PathBuf, b: PathBuf },
+    /// Adds the parts of a sharded run exactly (docs/DISTRIBUTED.md): writes OUT.exr, OUT.png,
+    /// OUT.part (itself mergeable) and the stats; reports missing shards.
+    Merge(MergeArgs),
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// The merged image, OUT.exr; OUT.png and OUT.part beside it.
+    out: PathBuf,
+    /// Part files of shards or of earlier merges (SHARD.exr stands for the SHARD.part beside it).
+    #[arg(required = true, value_name = "PARTS")]
+    parts: Vec<PathBuf>,
+    /// Statistics JSON (default: OUT.stats.json).
+    #[arg(long, value_name = "PATH")]
+    stats: Option<PathBuf>,
+    /// Refuse (exit 2) if any shard of the run is missing.
+    #[arg(long)]
+    complete: bool,
+    /// No summary line.
+    #[arg(long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -118,6 +139,13 @@ struct RenderArgs {
     /// Continue the run whose checkpoint belongs to --out.
     #[arg(long)]
     resume: bool,
+    /// Render shard K of N (counting from 0) of the run (docs/DISTRIBUTED.md). Default: from
+    /// a Slurm array (SLURM_ARRAY_TASK_ID) or a Kubernetes Indexed Job (JOB_COMPLETION_INDEX).
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
+    /// The number of shards with JOB_COMPLETION_INDEX (else FIRSTSHOT_SHARD_COUNT).
+    #[arg(long, value_name = "N")]
+    shard_count: Option<u32>,
 }
 
 /// A failure and the exit status it maps to (docs/CLI.md: 2 usage or scene error, 1 run failure).
@@ -227,6 +255,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Compare { a, b }) => compare(&a, &b),
+        Some(Command::Merge(m)) => merge(&m),
         None => run(cli.render),
     };
     match result {
@@ -264,6 +293,18 @@ fn compare(a: &Path, b: &Path) -> Result<(), Failure> {
 
 fn stdout_failure(e: std::io::Error) -> Failure {
     Failure { status: 1, error: anyhow::anyhow!("writing to standard output: {e}") }
+}
+
+fn merge(m: &MergeArgs) -> Result<(), Failure> {
+    let request = firstshot::merge::MergeRequest {
+        out: &m.out,
+        parts: &m.parts,
+        stats: m.stats.as_deref(),
+        complete: m.complete,
+        quiet: m.quiet,
+    };
+    firstshot::merge::merge_files(&request)?;
+    Ok(())
 }
 
 fn print_adapters() -> Result<(), Failure> {
@@ -423,6 +464,7 @@ struct Job<'a> {
     say: Say,
     start: Instant,
     tessellation_ms: f64,
+    shard: Option<firstshot::shard::ShardRun>,
 }
 
 fn run(args: RenderArgs) -> Result<(), Failure> {
@@ -438,10 +480,17 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     let start = Instant::now();
     // Every check that can refuse comes before any folder is made or file written.
     let scene = scene::load(&scene_path)?;
-    let options = render_options(&args, &scene)?;
+    let mut options = render_options(&args, &scene)?;
     let checkpoint_every = args.checkpoint_every.map(|s| seconds("--checkpoint-every", s)).transpose()?;
+    // A shard (docs/DISTRIBUTED.md): its own seed and share of the steps, its own file names.
+    let shard = firstshot::shard::from_cli(args.shard.as_deref(), args.shard_count)?;
+    let shard = shard.map(|s| s.apply(&scene, &mut options)).transpose()?;
     let exr = cli::outputs::exr_path(args.out.as_deref(), &scene_path)?;
-    let mut plan = OutputPlan::new(&exr, args.stats.as_deref(), &scene_path)?;
+    let (exr, stats) = match &shard {
+        Some(s) => (s.shard.path(&exr), args.stats.as_deref().map(|p| s.shard.path(p))),
+        None => (exr, args.stats.clone()),
+    };
+    let mut plan = OutputPlan::new(&exr, stats.as_deref(), &scene_path, shard.is_some())?;
     firstshot::render::check_options(&scene, &options)?;
     say.say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
 
@@ -475,6 +524,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         say,
         start,
         tessellation_ms,
+        shard,
     };
     let result = job.render(resume);
     if result.as_ref().is_err_and(|f| f.status == 2) {
@@ -545,8 +595,20 @@ impl Job<'_> {
         let steps = if options.iterations == 0 { 0 } else { stats.iterations };
         rendered.image.write_exr(&paths.exr, &self.attributes(steps))?;
         rendered.image.write_png(&paths.png, rendered.image.auto_exposure())?;
+        if let (Some(run), Some(part)) = (&self.shard, &paths.part) {
+            let scene = self.scene_path.display().to_string();
+            let (w, h) = (options.width, options.height);
+            firstshot::merge::Part::of_shard(run, &scene, w, h, &rendered.image_sum, steps)?.write(part)?;
+        }
         if self.args.stats.is_some() {
-            let json = serde_json::to_string_pretty(stats).context("encoding the stats")?;
+            let json = match &self.shard {
+                None => serde_json::to_string_pretty(stats),
+                Some(run) => serde_json::to_value(stats).and_then(|mut json| {
+                    json["shard"] = firstshot::shard::stats_json(run);
+                    serde_json::to_string_pretty(&json)
+                }),
+            };
+            let json = json.context("encoding the stats")?;
             paths.write_stats(format!("{json}\n").as_bytes())?;
         }
         if stats.iterations > 0 && options.iterations > 0 {

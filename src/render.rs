@@ -159,6 +159,9 @@ pub struct RenderStats {
 /// The rendered image and how it was made.
 pub struct Rendered {
     pub image: Image,
+    /// The raw image sum the image is the mean of (rgb sum, w the number of estimates per
+    /// pixel), row by row: what a shard's part file keeps (`merge`).
+    pub image_sum: Vec<[f32; 4]>,
     pub stats: RenderStats,
     /// The run was stopped by `Hooks::stop_requested` before its step count.
     pub interrupted: bool,
@@ -557,13 +560,16 @@ impl<'a> Renderer<'a> {
             0 => iteration_stats.steps.saturating_sub(self.burn_in),
             passes => passes,
         };
-        let image = self.read_image()?;
+        let image_sum = self.estimate.read_sum(&self.ctx.device, &self.ctx.queue)?;
+        let pixels = crate::stages::image_estimate::image_of_sums(&image_sum)?;
+        let image = Image::new(self.options.width, self.options.height, pixels);
         let image_ms = milliseconds(image_start);
         self.ctx.check()?;
         let (o, fs) = (&self.options, self.first_shot.as_ref());
         Ok(Rendered {
             interrupted: iteration_stats.interrupted || direct.interrupted,
             image,
+            image_sum,
             stats: RenderStats {
                 adapter: self.ctx.summary.clone(),
                 scene: self.scene.source.display().to_string(),

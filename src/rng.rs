@@ -5,7 +5,8 @@
 use rand_core::RngCore;
 use rand_pcg::Pcg32;
 
-fn splitmix64(mut z: u64) -> u64 {
+/// SplitMix64 (Steele, Lea, Flood 2014): a bijective 64-bit mixing function.
+pub fn splitmix64(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);

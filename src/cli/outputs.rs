@@ -56,6 +56,8 @@ pub struct OutputPlan {
     pub exr: PathBuf,
     pub png: PathBuf,
     pub checkpoint: PathBuf,
+    /// A shard's part file (`merge::Part`), beside the EXR.
+    pub part: Option<PathBuf>,
     pub stats: Option<StatsTarget>,
     /// Folders of the outputs, to make (if missing) and to probe with a temporary file.
     folders: Vec<PathBuf>,
@@ -259,10 +261,19 @@ fn folder_of(path: &Path) -> PathBuf {
 
 impl OutputPlan {
     /// Checks every output of a render that writes `exr` (and the PNG and checkpoint beside
-    /// it) and `stats`, from the scene at `scene`. Writes nothing and makes no folder.
-    pub fn new(exr: &Path, stats: Option<&Path>, scene: &Path) -> Result<OutputPlan, Error> {
+    /// it, and with `part` a shard's part file) and `stats`, from the scene at `scene`.
+    /// Writes nothing and makes no folder.
+    pub fn new(exr: &Path, stats: Option<&Path>, scene: &Path, part: bool) -> Result<OutputPlan, Error> {
         let png = exr.with_extension("png");
         let checkpoint = exr.with_extension("checkpoint");
+        let part_path = exr.with_extension("part");
+        let part = match part {
+            true => Some(image_output(
+                &part_path,
+                &format!("--out {} (the shard's part beside the EXR)", part_path.display()),
+            )?),
+            false => None,
+        };
         let out = |p: &Path| format!("--out {}", p.display());
         let written = [
             (image_output(exr, &out(exr))?, exr, "the image"),
@@ -292,6 +303,9 @@ impl OutputPlan {
         for (_, given, what) in &written {
             named.push((identity(given), format!("{what} {}", given.display())));
         }
+        if part.is_some() {
+            named.push((identity(&part_path), format!("the part {}", part_path.display())));
+        }
         if let (Some(path), Some(target)) = (stats, &stats_target) {
             let id = match target {
                 StatsTarget::File(p) => identity(p),
@@ -306,6 +320,7 @@ impl OutputPlan {
         }
 
         let mut folders: Vec<PathBuf> = written.iter().map(|(p, _, _)| folder_of(p)).collect();
+        folders.extend(part.iter().map(|p| folder_of(p)));
         if let Some(StatsTarget::File(p)) = &stats_target {
             folders.push(folder_of(p));
         }
@@ -315,7 +330,7 @@ impl OutputPlan {
             check_folder(folder)?;
         }
         let [(exr, ..), (png, ..), (checkpoint, ..)] = written;
-        Ok(OutputPlan { exr, png, checkpoint, stats: stats_target, folders, made: Vec::new() })
+        Ok(OutputPlan { exr, png, checkpoint, part, stats: stats_target, folders, made: Vec::new() })
     }
 
     /// Makes the missing folders and writes (and removes) a temporary file in each, so that

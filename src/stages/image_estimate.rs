@@ -198,17 +198,23 @@ impl ImageEstimate {
         encoder.clear_buffer(&self.image_sum, 0, None);
     }
 
+    /// Reads the image sum back (its two halves, Le + D then G, of rgb sum and w the number
+    /// of estimates per pixel, each row by row from the top).
+    pub fn read_sum(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<[f32; 4]>> {
+        let pixels = self.width as u64 * self.height as u64;
+        buffers::read_back(device, queue, &self.image_sum, 2 * pixels * 16)
+    }
+
     /// Reads the image back, row by row from the top (`image_of_sums`).
     pub fn read_mean(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<[f32; 3]>> {
-        let pixels = self.width as u64 * self.height as u64;
-        let sums: Vec<[f32; 4]> = buffers::read_back(device, queue, &self.image_sum, 2 * pixels * 16)?;
-        image_of_sums(&sums)
+        image_of_sums(&self.read_sum(device, queue)?)
     }
 }
 
 /// The image of an image sum (two halves of rgb sum, w count per pixel: Le + D, then G): per
 /// pixel the mean of the first half plus the mean of the second (zero where no step has
-/// gathered yet, as in a direct-light image).
+/// gathered yet, as in a direct-light image), each mean and their sum in f32 (`merge`
+/// reproduces it bit for bit from a part).
 pub fn image_of_sums(sums: &[[f32; 4]]) -> Result<Vec<[f32; 3]>> {
     let (direct, gathered) = sums.split_at(sums.len() / 2);
     let mean = |s: &[f32; 4]| [s[0] / s[3], s[1] / s[3], s[2] / s[3]];

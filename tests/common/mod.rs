@@ -6,6 +6,7 @@ pub mod bin;
 pub mod ray_caster;
 pub mod scenes;
 pub mod scratch;
+pub mod shards;
 
 use firstshot::gpu::{AdapterChoice, Context};
 use std::path::PathBuf;
