@@ -64,8 +64,9 @@ pub struct RenderOptions {
     /// Steps that advance the state before any is averaged into the image; `None`: from
     /// the scene's albedo (`default_burn_in`).
     pub burn_in: Option<u32>,
-    /// Steps of the iteration that share one point on each area light (and its window item
-    /// buffers, the costliest part of the per-pixel direct light).
+    /// Steps of the iteration per estimate of the direct light (Le + D, with new points on
+    /// the area lights and their window item buffers, the costliest image stages); the
+    /// indirect light G is estimated every step.
     pub window_steps: u32,
 }
 

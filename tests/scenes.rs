@@ -64,10 +64,11 @@ fn test02_cornell_full_global_illumination_matches_the_reference() {
     let Some((image, reference)) = cornell(1000) else { return };
     let e = image_error(&image, &reference).unwrap();
     eprintln!("cornell full, 1000 steps: {e:?}");
-    // Per-pixel image, seed 1: measured RMSE 3.15%, means -1.9%, -1.2%, -1.1% (the rest is
-    // the noise of one bundle direction per step, which the whole image shares). Bounds:
-    // 3.5% RMSE (the per-patch image stopped at 5.5%) and 2% per channel mean.
-    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.02) && e.relative_rmse < 0.035;
+    // Per-pixel image, seed 1: measured RMSE 2.10%, means -1.5%, -0.8%, -0.7% (the red mean
+    // is low near the blocks' feet, where floor patches lie partly inside the blocks:
+    // docs/ALGORITHM.md 6). Bounds: 3% RMSE (the per-patch image stopped at 5.5%) and 2%
+    // per channel mean.
+    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.02) && e.relative_rmse < 0.03;
     if !ok {
         save_on_failure("cornell_full", &image, &reference);
     }
