@@ -88,13 +88,13 @@ impl Checkpoint {
     }
 
     /// Checks what the checksum cannot (it is as easy to recompute as to forge): that the
-    /// numbers are those of a run resumed after `burn_in` steps of the iteration, with a
-    /// direct-light estimate every `window_steps` steps. Every number of the state and of the
-    /// image sum must be finite, and every pixel's weights (the fourth component of its two
-    /// sums, `stages::image_estimate`) must be the direct-light estimates and the image
-    /// steps of `step - burn_in` image steps. A refusal names the file (exit status 2),
-    /// instead of a GPU failure later.
-    pub fn check_numbers(&self, path: &Path, burn_in: u32, window_steps: u32) -> Result<()> {
+    /// numbers are those of a run resumed after `burn_in` steps of the iteration, whose first
+    /// n image steps hold `direct_estimates(n)` estimates of the direct light. Every number
+    /// of the state and of the image sum must be finite, and every pixel's weights (the
+    /// fourth component of its two sums, `stages::image_estimate`) must be those direct-light
+    /// estimates and the `step - burn_in` image steps. A refusal names the file (exit status
+    /// 2), instead of a GPU failure later.
+    pub fn check_numbers(&self, path: &Path, burn_in: u32, direct_estimates: &dyn Fn(u32) -> u32) -> Result<()> {
         if !self.state.len().is_multiple_of(4) || !self.image_sum.len().is_multiple_of(16) {
             return Err(corrupt(path, "its arrays are not whole numbers"));
         }
@@ -112,7 +112,7 @@ impl Checkpoint {
             return Err(corrupt(path, "its image holds numbers that are not finite"));
         }
         let (direct, gathered) = sum.split_at(sum.len() / 8 * 4);
-        let direct_passes = image_steps.div_ceil(window_steps.max(1));
+        let direct_passes = direct_estimates(image_steps);
         if direct.chunks_exact(4).any(|p| p[3] != direct_passes as f32)
             || gathered.chunks_exact(4).any(|p| p[3] != image_steps as f32)
         {
@@ -167,9 +167,9 @@ mod tests {
             state: [0.5f32; 8].iter().flat_map(|v| v.to_le_bytes()).collect(),
             image_sum: [pixel(0.25, 2.0), pixel(3.0, 2.0)].concat(),
         };
-        good.check_numbers(p, 10, 1).unwrap();
+        good.check_numbers(p, 10, &|n| n).unwrap();
         let refused = |c: &Checkpoint, burn_in: u32, part: &str| {
-            let e = c.check_numbers(p, burn_in, 1).expect_err(part).to_string();
+            let e = c.check_numbers(p, burn_in, &|n| n).expect_err(part).to_string();
             assert!(e.contains("x.checkpoint") && e.contains(part), "{e}");
             assert!(Checkpoint::from_bytes(p, &c.to_bytes()).is_ok(), "the checksum alone passes it");
         };

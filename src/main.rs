@@ -446,7 +446,8 @@ fn read_resume(
             path.display()
         )));
     }
-    checkpoint.check_numbers(path, firstshot::render::burn_in_steps(scene, options), options.window_steps)?;
+    let burn_in = firstshot::render::burn_in_steps(scene, options);
+    checkpoint.check_numbers(path, burn_in, &|n| firstshot::render::direct_light_estimates(n, options))?;
     Ok(Some(checkpoint))
 }
 

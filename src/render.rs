@@ -208,6 +208,27 @@ pub fn burn_in_steps(scene: &Scene, options: &RenderOptions) -> u32 {
     }
 }
 
+/// Whether image step `i` (0 for the first step past the burn-in) estimates the direct
+/// light: each of the first `direct_passes` (so that a short run's direct light is as good
+/// as a direct-light image), then one in `window_steps` (the direct light converges in far
+/// fewer samples than the gathered indirect light, which every step estimates).
+pub fn direct_light_due(i: u32, options: &RenderOptions) -> bool {
+    due(i, options.direct_passes, options.window_steps.max(1))
+}
+
+fn due(i: u32, first: u32, every: u32) -> bool {
+    i < first || i.is_multiple_of(every)
+}
+
+/// How many of the first `n` image steps estimate the direct light (`direct_light_due`).
+pub fn direct_light_estimates(n: u32, options: &RenderOptions) -> u32 {
+    estimates(n, options.direct_passes, options.window_steps.max(1))
+}
+
+fn estimates(n: u32, first: u32, every: u32) -> u32 {
+    if n <= first { n } else { first + n.div_ceil(every) - first.div_ceil(every) }
+}
+
 /// Identifies a scene and every option that changes the image (not the step count or the
 /// time limit, which a resumed run may change), so a checkpoint is only resumed by the run
 /// it belongs to.
@@ -426,8 +447,9 @@ impl<'a> Renderer<'a> {
     }
 
     /// Writes the uniforms of step `k`: its bundle, then, once past the burn-in, its camera
-    /// sample (a uniform point of every pixel) and, every `window_steps` steps, new points on
-    /// the area lights for a direct-light estimate, all from the step's own generator.
+    /// sample (a uniform point of every pixel) and, on the steps that estimate the direct
+    /// light (`direct_light_due`), new points on the area lights, all from the step's own
+    /// generator.
     pub fn write_step(&mut self, k: u32) {
         let queue = &self.ctx.queue;
         let image_step = k >= self.burn_in;
@@ -436,10 +458,10 @@ impl<'a> Renderer<'a> {
         if image_step {
             let jitter = [rng.uniform() as f32, rng.uniform() as f32];
             self.write_camera(jitter);
-            let every = self.options.window_steps.max(1);
-            self.direct_due = (k - self.burn_in).is_multiple_of(every);
+            let i = k - self.burn_in;
+            self.direct_due = direct_light_due(i, &self.options);
             if self.direct_due {
-                let pass = ((k - self.burn_in) / every) as u64;
+                let pass = direct_light_estimates(i, &self.options) as u64;
                 self.windows_due = self.direct.prepare_pass(queue, pass);
             }
         }
@@ -784,3 +806,22 @@ struct IterationStats {
 
 /// Steps per batch between checks of the fragment overflow flag (each check waits for the GPU).
 const STEPS_PER_BATCH: u32 = 8;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn direct_light_estimates_count_the_steps_that_are_due() {
+        for (first, every) in [(0, 1), (0, 4), (1, 2), (64, 4), (5, 3), (7, 7), (3, 1000)] {
+            let mut count = 0;
+            for n in 0..300 {
+                assert_eq!(estimates(n, first, every), count, "first {first}, every {every}, n {n}");
+                count += due(n, first, every) as u32;
+            }
+        }
+        // Every step at first, then one in four.
+        assert_eq!(estimates(64, 64, 4), 64);
+        assert_eq!(estimates(1000, 64, 4), 64 + 234);
+    }
+}

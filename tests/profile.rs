@@ -42,7 +42,8 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
         bundle_resolution: RESOLUTION,
         // Every step reaches the image, so every stage runs.
         burn_in: Some(0),
-        // Step 0 estimates the direct light and gathers, steps 1 and 2 only gather.
+        // Steps 0 and 2 estimate the direct light and gather, step 1 only gathers.
+        direct_passes: 1,
         window_steps: 2,
         ..RenderOptions::from_scene(&scene)
     };
@@ -52,8 +53,8 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
         if profiled {
             let times = renderer.profile_step(k, &timer, vec![]).unwrap();
             let names: Vec<&str> = times.iter().map(|t| t.name).collect();
-            // The direct light every `window_steps` steps (the first of each group), the
-            // gather every step.
+            // The direct light on the first `direct_passes` steps and then every
+            // `window_steps` steps (`render::direct_light_due`), the gather every step.
             let mut expected = BUNDLE_STAGES.to_vec();
             expected.push("camera");
             if k % options.window_steps == 0 {
