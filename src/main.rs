@@ -111,8 +111,9 @@ struct RenderArgs {
     /// (default: from the scene's albedo).
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     burn_in: Option<u32>,
-    /// Steps of the iteration per estimate of the direct light, each with new points on the
-    /// area lights and their windows (default 4; the indirect light is estimated every step).
+    /// After the first --direct-passes image steps (each of which estimates the direct
+    /// light), steps of the iteration per estimate of the direct light, each with new points
+    /// on the area lights and their windows (default 4; the indirect light every step).
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     window_steps: Option<u32>,
     /// Image width in pixels.
