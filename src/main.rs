@@ -113,7 +113,7 @@ struct RenderArgs {
     burn_in: Option<u32>,
     /// After the first --direct-passes image steps (each of which estimates the direct
     /// light), steps of the iteration per estimate of the direct light, each with new points
-    /// on the area lights and their windows (default 4; the indirect light every step).
+    /// on the area lights and their windows (default 8; the indirect light every step).
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     window_steps: Option<u32>,
     /// Image width in pixels.

@@ -23,9 +23,11 @@ use std::time::Instant;
 /// that edges are anti-aliased like the references and penumbrae converge.
 pub const DEFAULT_DIRECT_PASSES: u32 = 64;
 
-/// Steps that share one point on each area light by default: the windows cost about as much
-/// as a bundle step on a CPU adapter, and 1000 steps still place 250 points on each light.
-pub const DEFAULT_WINDOW_STEPS: u32 = 4;
+/// Image steps per direct-light estimate by default, after the first `direct_passes`: the
+/// windows and the direct light cost about as much as a bundle step on a CPU adapter, and a
+/// 1000-step run still estimates the direct light 181 times (64 + 117), which leaves its
+/// image error where it is with one in four (Cornell box 2.06% against 2.10%).
+pub const DEFAULT_WINDOW_STEPS: u32 = 8;
 
 /// The burn-in leaves out of the image the steps before the state J carries all but this
 /// share of the light of further bounces.
