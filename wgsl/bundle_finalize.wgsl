@@ -1,5 +1,7 @@
 // Bundle finalize (docs/ALGORITHM.md 2.4): J_j = (dP / A_j) * (sum of received radiance) from the
-// fixed-point sums, win_j = -s_j d; the sums are cleared for the next step.
+// signed fixed-point sums, win_j = -s_j d, K_j = J_j with its control variate, the running
+// mean Lbar_j and (past the burn-in) the sum of K_j for the image; the sums are cleared for
+// the next step.
 //
 // Compute, one invocation per patch (2D dispatch past 65535 workgroups): each patch's 6
 // sums and its state have one writer.

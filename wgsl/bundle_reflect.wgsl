@@ -1,7 +1,10 @@
 // Bundle reflection (docs/ALGORITHM.md 2.2): the radiance every patch sends into this step's bundle,
-//   O_j = Le_j + Lfs_j(c_j, s_j d) + 2 pi J_j f_j(win_j, c_j, s_j d),
-// with Le left out for first-shot lights (their first reflection replaces them), and the
-// largest O of the step (for the fixed-point scale of the transfer).
+//   O_j = Le_j + Lfs_j(c_j, s_j d) + 2 kd_j K_j + 2 pi J_j f_glossy_j(win_j, c_j, s_j d)
+// (2 kd K = 2 pi K f_diffuse: K_j is J_j with its control variate, bundle_finalize), with Le
+// left out for first-shot lights (their first reflection replaces them); the same with the
+// mean of K_j over the image steps in place of K_j, which the image gathers
+// (`image_outgoing`, docs/ALGORITHM.md 6); and the largest |O| of the step (for the
+// fixed-point scale of the transfer).
 //
 // Compute, one invocation per patch (2D dispatch past 65535 workgroups), the only writer
 // of its `outgoing` (rgb O_j, w s_j). `max_bits` takes the largest O channel by its bits

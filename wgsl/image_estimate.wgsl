@@ -14,8 +14,9 @@
 //
 // The gather: x projected onto the bundle's grid gives its line; along it, in x's front
 // direction s d, the nearest surface m (by the exact distance along the ray from x to m's
-// plane, among the fragments of the line near x) sends O_m if its front faces x, black if
-// its back does; the environment if there is none.
+// plane, among the fragments of the line near x) sends what it sends the image
+// (`image_outgoing` of bundle_reflect) if its front faces x, black if its back does; the
+// environment if there is none.
 //
 // The image sum has two halves, each a running sum (rgb) and count (w) per pixel: Le + D
 // (entry point `direct`, on the passes that draw new light points) and G (entry point
