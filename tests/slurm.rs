@@ -173,9 +173,16 @@ fn slurm_array_and_dependent_merge_match_a_local_merge_and_beat_one_shard() {
     eprintln!(
         "relative RMSE against {REFERENCE_STEPS} steps: merged {merged:.4}, shards {shards:.4?} (mean {mean:.4})"
     );
-    // sqrt(4) less noise would give 0.5; the reference's own noise and the shared first
-    // shot raise it a little. One shard is 0.75 or more only if merging did not add steps.
-    assert!(merged < 0.75 * mean, "merged {merged:.4} is not well below a shard's {mean:.4}: {shards:?}");
+    // In squared error, 4 times the steps leave a quarter of the noise; the reference's own
+    // noise, which every image is measured against, adds the same to each (measured: 0.50
+    // and 0.56 of the shards' mean squared error). A merge that added no steps would stay
+    // near 1.
+    let shard_mse = shards.iter().map(|e| e * e).sum::<f64>() / shards.len() as f64;
+    assert!(
+        merged * merged < 0.7 * shard_mse,
+        "merged {merged:.4} is not well below the shards' RMS error {:.4}: {shards:?}",
+        shard_mse.sqrt()
+    );
     // Single shards' errors scatter by a factor 2 (one bundle direction per step moves the
     // whole image: 0.13-0.30 measured), so the luckiest of four can beat the merge; the
     // median cannot, unless merging did not add steps.
