@@ -351,7 +351,8 @@ impl Part {
     }
 
     pub fn read(path: &Path) -> Result<Part> {
-        let bytes = std::fs::read(path).map_err(|e| Error::Usage(format!("{}: {e}", path.display())))?;
+        // Regular files only, like every other input (a FIFO must not hang the merge).
+        let bytes = crate::files::read_named_input(path)?;
         Part::from_bytes(path, &bytes)
     }
 
