@@ -116,6 +116,10 @@ struct RenderArgs {
     /// on the area lights and their windows (default 8; the indirect light every step).
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     window_steps: Option<u32>,
+    /// The camera to render, by name: "camera" for the [camera] table, or a [[cameras]]
+    /// entry's name (default: the first of the scene's cameras).
+    #[arg(long, value_name = "NAME")]
+    camera: Option<String>,
     /// Image width in pixels.
     #[arg(long, value_name = "W")]
     width: Option<u32>,
@@ -481,7 +485,10 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     let say = Say { quiet: args.quiet };
     let start = Instant::now();
     // Every check that can refuse comes before any folder is made or file written.
-    let scene = scene::load(&scene_path)?;
+    let mut scene = scene::load(&scene_path)?;
+    if let Some(name) = &args.camera {
+        scene.select_camera(name).map_err(|e| usage(format!("--camera {name}: {e}")))?;
+    }
     let mut options = render_options(&args, &scene)?;
     let checkpoint_every = args.checkpoint_every.map(|s| seconds("--checkpoint-every", s)).transpose()?;
     // A shard (docs/DISTRIBUTED.md): its own seed and share of the steps, its own file names.

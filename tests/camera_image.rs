@@ -11,6 +11,7 @@ fn scene(camera: Camera, environment: [f32; 3]) -> Scene {
     Scene {
         source: "test".into(),
         camera,
+        cameras: vec![firstshot::scene::NamedCamera { name: "camera".into(), camera }],
         environment,
         settings: Settings::default(),
         materials: vec![],

@@ -114,6 +114,7 @@ fn test02_usage_errors_exit_2_and_write_nothing() {
         (vec!["--direct-passes", "0"], "--direct-passes 0"),
         (vec!["--window-steps", "0"], "--window-steps 0"),
         (vec!["--burn-in", "-1"], "--burn-in"),
+        (vec!["--camera", "side"], "--camera side: the scene has no camera \"side\"; its cameras are \"camera\""),
     ] {
         let err = refused_render(&scratch, &[&[cb.as_str()], &args[..]].concat(), "x.exr");
         assert!(err.contains(part), "{args:?}: stderr lacks {part:?}: {err}");

@@ -380,6 +380,44 @@ fn test11_format_and_camera_refusals() {
     }
 }
 
+/// MINIMAL with `[[cameras]]` entries appended (each a name and the keys of MINIMAL's camera,
+/// moved back along z by its index).
+fn with_cameras(names: &[&str]) -> String {
+    let mut text = MINIMAL.to_string();
+    for (i, name) in names.iter().enumerate() {
+        text += &format!(
+            "\n[[cameras]]\nname = \"{name}\"\nposition = [0, 1, {}]\nlook_at = [0, 1, 0]\nup = [0, 1, 0]\nfov_y = 30\nwidth = 32\nheight = 16\n",
+            -6 - i as i64
+        );
+    }
+    text
+}
+
+#[test]
+fn test11b_more_cameras_load_in_order_and_are_picked_by_name() {
+    let mut scene = load_str(&with_cameras(&["door", "top"]), source()).unwrap();
+    let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["camera", "door", "top"]);
+    assert_eq!(scene.camera, scene.cameras[0].camera, "[camera] is the default view");
+    assert_eq!(scene.camera.width, 64);
+    scene.select_camera("top").unwrap();
+    assert_eq!(scene.camera.position, DVec3::new(0.0, 1.0, -7.0));
+    assert_eq!((scene.camera.width, scene.camera.height, scene.camera.fov_y), (32, 16, 30.0));
+    let message = scene.select_camera("side").unwrap_err();
+    assert_contains(&message, "\"side\"");
+    assert_contains(&message, "\"camera\", \"door\", \"top\"");
+
+    assert_contains(&refused(&with_cameras(&["door", "door"]), "cameras[1].name"), "named twice");
+    assert_contains(&refused(&with_cameras(&["camera"]), "cameras[0].name"), "named twice");
+    refused(&with_cameras(&[""]), "cameras[0].name");
+    refused(&with_cameras(&["a"]).replace("name = \"a\"\n", ""), "cameras[0].name");
+    refused(&with_cameras(&["a"]).replace("fov_y = 30", "fov_y = 200"), "cameras[0].fov_y");
+    assert_contains(&refused(&with_cameras(&["a"]).replace("fov_y = 30", "fov = 30"), "cameras[0].fov"), "fov_y");
+    // [camera] stays required: more cameras do not replace it.
+    let without_main = with_cameras(&["a"]).replacen("[camera]", "[nothing]", 1);
+    assert!(load_str(&without_main, source()).is_err());
+}
+
 #[test]
 fn test12_settings_and_environment_refusals() {
     let with = |settings: &str| format!("{MINIMAL}\n[settings]\n{settings}\n");

@@ -6,7 +6,7 @@
 
 use super::brdf::max_directional_albedo;
 use super::shapes::{self, LIGHT_PLANARITY, MAX_SIERPINSKI_LEVEL, POLYGON_PLANARITY, Transform};
-use super::{Camera, Light, Material, MaterialKind, Rgb, Scene, Settings, Surface, Triangle};
+use super::{Camera, Light, NamedCamera, Material, MaterialKind, Rgb, Scene, Settings, Surface, Triangle};
 use crate::{Error, Result};
 use glam::DVec3;
 use std::collections::HashMap;
@@ -18,8 +18,9 @@ pub const MAX_RESOLUTION: i64 = 16384;
 /// The largest `subdivisions` of an area light (2 n^2 patches, (n+1)^2 light samples).
 pub const MAX_SUBDIVISIONS: i64 = 64;
 
-const TOP_KEYS: &[&str] = &["format", "camera", "environment", "settings", "materials", "shapes", "lights"];
+const TOP_KEYS: &[&str] = &["format", "camera", "cameras", "environment", "settings", "materials", "shapes", "lights"];
 const CAMERA_KEYS: &[&str] = &["position", "look_at", "up", "fov_y", "width", "height"];
+const NAMED_CAMERA_KEYS: &[&str] = &["name", "position", "look_at", "up", "fov_y", "width", "height"];
 const ENVIRONMENT_KEYS: &[&str] = &["radiance"];
 const SETTINGS_KEYS: &[&str] = &["patch_size", "hemicube_resolution", "bundle_resolution", "iterations", "seed"];
 const TRANSFORM_KEYS: &[&str] = &["scale", "rotate", "translate"];
@@ -50,7 +51,8 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
     }
     root.only(TOP_KEYS)?;
 
-    let camera = camera(&root.req("camera", "a [camera] table")?.table()?)?;
+    let cameras = cameras(&root)?;
+    let camera = cameras[0].camera;
     let environment = match root.get("environment") {
         Some(e) => {
             let e = e.table()?;
@@ -97,7 +99,7 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
         ));
     }
 
-    Ok(Scene { source: source.to_path_buf(), camera, environment, settings, materials, surfaces, lights })
+    Ok(Scene { source: source.to_path_buf(), camera, cameras, environment, settings, materials, surfaces, lights })
 }
 
 /// Parses the TOML text, keeping the toml crate's line and column in the key.
@@ -122,8 +124,32 @@ fn parse_toml(text: &str, source: &Path) -> Result<Table> {
     })
 }
 
+/// `[camera]` (required, named "camera") and the `[[cameras]]` entries, in that order.
+fn cameras(root: &Tbl) -> Result<Vec<NamedCamera>> {
+    let main = root.req("camera", "a [camera] table")?.table()?;
+    main.only(CAMERA_KEYS)?;
+    let mut list = vec![NamedCamera { name: "camera".into(), camera: camera(&main)? }];
+    if let Some(cs) = root.get("cameras") {
+        for t in cs.tables("[[cameras]] tables, each with a name")? {
+            t.only(NAMED_CAMERA_KEYS)?;
+            let name_item = t.req("name", "a name, e.g. name = \"door\"")?;
+            let name = name_item.string()?.to_string();
+            if name.is_empty() {
+                return Err(name_item.err("must not be empty"));
+            }
+            if list.iter().any(|c: &NamedCamera| c.name == name) {
+                return Err(name_item.err(format!(
+                    "camera \"{name}\" is named twice (the [camera] table is named \"camera\"): give each a name of its own"
+                )));
+            }
+            list.push(NamedCamera { name, camera: camera(&t)? });
+        }
+    }
+    Ok(list)
+}
+
+/// The keys of one camera table (the caller has checked which keys it may have).
 fn camera(t: &Tbl) -> Result<Camera> {
-    t.only(CAMERA_KEYS)?;
     let position = t.req("position", "3 numbers")?.vec3()?;
     let look_at = t.req("look_at", "3 numbers")?.vec3()?;
     let up_item = t.req("up", "3 numbers")?;

@@ -23,7 +23,12 @@ pub type Rgb = [f32; 3];
 pub struct Scene {
     /// The scene file it came from (errors and stats name it).
     pub source: PathBuf,
+    /// The camera this run renders: `[camera]`, or the one picked by name with
+    /// `select_camera` (`--camera NAME`).
     pub camera: Camera,
+    /// Every camera of the scene, in file order: `[camera]` first (named "camera"), then
+    /// the `[[cameras]]` entries. Never empty.
+    pub cameras: Vec<NamedCamera>,
     /// Radiance arriving from outside the scene (`[environment] radiance`).
     pub environment: Rgb,
     pub settings: Settings,
@@ -43,6 +48,29 @@ pub struct Camera {
     pub fov_y: f64,
     pub width: u32,
     pub height: u32,
+}
+
+/// A camera with the name a user picks it by (`--camera NAME`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedCamera {
+    pub name: String,
+    pub camera: Camera,
+}
+
+impl Scene {
+    /// Makes the camera called `name` the one this run renders. The error lists the names.
+    pub fn select_camera(&mut self, name: &str) -> std::result::Result<(), String> {
+        match self.cameras.iter().find(|c| c.name == name) {
+            Some(c) => {
+                self.camera = c.camera;
+                Ok(())
+            }
+            None => {
+                let names: Vec<String> = self.cameras.iter().map(|c| format!("\"{}\"", c.name)).collect();
+                Err(format!("the scene has no camera \"{name}\"; its cameras are {}", names.join(", ")))
+            }
+        }
+    }
 }
 
 /// `[settings]`: defaults that command-line flags override.

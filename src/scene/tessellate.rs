@@ -363,16 +363,18 @@ pub(crate) mod tests {
 
     /// A scene made of the given surfaces and lights, with one diffuse material.
     pub(crate) fn scene_of(surfaces: Vec<Surface>, lights: Vec<Light>) -> Scene {
+        let camera = Camera {
+            position: DVec3::new(0.0, 0.0, 5.0),
+            look_at: DVec3::ZERO,
+            up: DVec3::Y,
+            fov_y: 45.0,
+            width: 64,
+            height: 64,
+        };
         Scene {
             source: "test.toml".into(),
-            camera: Camera {
-                position: DVec3::new(0.0, 0.0, 5.0),
-                look_at: DVec3::ZERO,
-                up: DVec3::Y,
-                fov_y: 45.0,
-                width: 64,
-                height: 64,
-            },
+            camera,
+            cameras: vec![crate::scene::NamedCamera { name: "camera".into(), camera }],
             environment: [0.0; 3],
             settings: Settings::default(),
             materials: vec![Material { name: "white".into(), kind: MaterialKind::Diffuse { albedo: [0.5; 3] } }],

@@ -144,16 +144,18 @@ pub fn solid_angle(p: DVec3, t: [DVec3; 3]) -> f64 {
 
 /// A scene with a default camera and nothing else, for tests that bring their own patches.
 pub fn bare_scene() -> firstshot::scene::Scene {
+    let camera = firstshot::scene::Camera {
+        position: DVec3::new(0.0, 0.0, -5.0),
+        look_at: DVec3::ZERO,
+        up: DVec3::Y,
+        fov_y: 40.0,
+        width: 32,
+        height: 32,
+    };
     firstshot::scene::Scene {
         source: "test".into(),
-        camera: firstshot::scene::Camera {
-            position: DVec3::new(0.0, 0.0, -5.0),
-            look_at: DVec3::ZERO,
-            up: DVec3::Y,
-            fov_y: 40.0,
-            width: 32,
-            height: 32,
-        },
+        camera,
+        cameras: vec![firstshot::scene::NamedCamera { name: "camera".into(), camera }],
         environment: [0.0; 3],
         settings: firstshot::scene::Settings::default(),
         materials: vec![],
