@@ -636,7 +636,7 @@ fn test17_no_surfaces_and_no_emitters() {
 #[test]
 fn test18_unknown_keys_are_refused_with_the_allowed_ones() {
     for (text, key, allowed) in [
-        (format!("colour = 1\n{MINIMAL}"), "colour", "format, camera, environment"),
+        (format!("colour = 1\n{MINIMAL}"), "colour", "format, camera, cameras, environment"),
         (format!("fmt = 1\n{MINIMAL}"), "fmt", "format, camera"),
         (edited(&[("fov_y = 40", "fov_y = 40\nfov_x = 40")]), "camera.fov_x", "position, look_at, up, fov_y"),
         (format!("{MINIMAL}\n[settings]\nspp = 4\n"), "settings.spp", "patch_size, hemicube_resolution"),

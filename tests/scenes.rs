@@ -64,11 +64,12 @@ fn test02_cornell_full_global_illumination_matches_the_reference() {
     let Some((image, reference)) = cornell(1000) else { return };
     let e = image_error(&image, &reference).unwrap();
     eprintln!("cornell full, 1000 steps: {e:?}");
-    // Per-pixel image, seed 1: measured RMSE 2.10%, means -1.5%, -0.8%, -0.7% (the red mean
-    // is low near the blocks' feet, where floor patches lie partly inside the blocks:
-    // docs/ALGORITHM.md 6). Bounds: 3% RMSE (the per-patch image stopped at 5.5%) and 2%
-    // per channel mean.
-    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.02) && e.relative_rmse < 0.03;
+    // Per-pixel image with contact cuts, seed 1: measured RMSE 1.57%, means -0.96%, -0.44%,
+    // -0.42% (seeds 2 and 3: red -0.64% and -0.60%). Without the cuts, floor patches that
+    // reached under the blocks and ceiling patches over the light's edge lost light: means
+    // -1.5%, -0.7%, -0.7% (docs/ALGORITHM.md 6). Bounds: 3% RMSE (the per-patch image
+    // stopped at 5.5%) and 1% per channel mean.
+    let ok = e.mean_ratio.iter().all(|r| (r - 1.0).abs() < 0.01) && e.relative_rmse < 0.03;
     if !ok {
         save_on_failure("cornell_full", &image, &reference);
     }

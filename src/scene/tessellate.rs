@@ -1,11 +1,14 @@
 //! Surfaces -> patches; lights -> light samples (docs/ALGORITHM.md section 1).
 //!
-//! A surface triangle is cut into k^2 congruent copies of itself scaled by 1/k, so every
-//! patch of a triangle has the same area and the source's normal, and the areas add up to
-//! the source's without a gap. An area light is meshed on its own n x n grid, whatever the
+//! A surface triangle is first cut along the lines where other surfaces stand on it or
+//! pass through it (`contact.rs`: no patch reaches under a box on the floor). Each triangle
+//! or piece is then cut into k^2 congruent copies of itself scaled by 1/k, so every patch of
+//! it has the same area and the source's normal, and the areas add up to the source's
+//! without a gap. An area light is meshed on its own n x n grid, whatever the
 //! patch size: its vertices are the first shot's samples, and the trapezoid weights need
 //! exactly that grid.
 
+use super::contact::{Pieces, contact_pieces};
 use super::{Light, Rgb, Scene, Triangle};
 use crate::{Error, Result};
 use glam::DVec3;
@@ -116,12 +119,21 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
         return Err(Error::Usage(format!("patch size must be a number > 0, got {patch_size}")));
     }
 
+    // Checked first, so that a degenerate triangle is reported as such, not as a contact.
+    for (s, surface) in scene.surfaces.iter().enumerate() {
+        for (t, triangle) in surface.triangles.iter().enumerate() {
+            SourceTriangle::new(scene, s, t, triangle)?;
+        }
+    }
+    let pieces = contact_pieces(scene);
     let (mut count, mut light_count) = (0u64, 0u64);
     for (s, surface) in scene.surfaces.iter().enumerate() {
         let copies = if surface.two_sided { 2 } else { 1 };
         for (t, triangle) in surface.triangles.iter().enumerate() {
-            let k = SourceTriangle::new(scene, s, t, triangle)?.splits(patch_size);
-            count = count.saturating_add(k.saturating_mul(k).saturating_mul(copies));
+            for source in SourceTriangle::pieces(scene, s, t, triangle, &pieces)? {
+                let k = source.splits(patch_size);
+                count = count.saturating_add(k.saturating_mul(k).saturating_mul(copies));
+            }
         }
     }
     for (l, light) in scene.lights.iter().enumerate() {
@@ -163,17 +175,18 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
     let mut out = Patches { patches: Vec::with_capacity(count as usize), samples: Vec::with_capacity(sample_count) };
     for (s, surface) in scene.surfaces.iter().enumerate() {
         for (t, triangle) in surface.triangles.iter().enumerate() {
-            let source = SourceTriangle::new(scene, s, t, triangle)?;
-            let base = Patch {
-                vertices: triangle.vertices,
-                normal: source.normal,
-                area: 0.0,
-                material: Some(triangle.material),
-                emission: surface.emission,
-                kind: PatchKind::Surface { surface: s as u32 },
-                twin: surface.two_sided,
-            };
-            source.split_into(&base, patch_size, &mut out.patches);
+            for source in SourceTriangle::pieces(scene, s, t, triangle, &pieces)? {
+                let base = Patch {
+                    vertices: source.vertices,
+                    normal: source.normal,
+                    area: 0.0,
+                    material: Some(triangle.material),
+                    emission: surface.emission,
+                    kind: PatchKind::Surface { surface: s as u32 },
+                    twin: surface.two_sided,
+                };
+                source.split_into(&base, patch_size, &mut out.patches);
+            }
         }
     }
     for (l, light) in scene.lights.iter().enumerate() {
@@ -231,6 +244,24 @@ impl SourceTriangle {
             ));
         }
         Ok(SourceTriangle { vertices: triangle.vertices, normal: cross.normalize(), area, longest_edge })
+    }
+
+    /// The triangle, or the pieces that contact cuts (`contact.rs`) leave of it, each with
+    /// the source's own normal so that all its patches stay exactly coplanar.
+    fn pieces(scene: &Scene, s: usize, t: usize, triangle: &Triangle, pieces: &Pieces) -> Result<Vec<Self>> {
+        let whole = SourceTriangle::new(scene, s, t, triangle)?;
+        let Some(cut) = pieces.get(&(s, t)) else {
+            return Ok(vec![whole]);
+        };
+        Ok(cut
+            .iter()
+            .map(|&[v0, v1, v2]| SourceTriangle {
+                vertices: [v0, v1, v2],
+                normal: whole.normal,
+                area: 0.5 * (v1 - v0).cross(v2 - v0).length(),
+                longest_edge: (v1 - v0).length().max((v2 - v1).length()).max((v0 - v2).length()),
+            })
+            .collect())
     }
 
     /// k: the number of pieces each edge is cut into. Saturates instead of overflowing, so
