@@ -511,6 +511,9 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         patches.patches.len(),
         patches.samples.len()
     ));
+    for note in &patches.notes {
+        say.say(format!("note: {note}"));
+    }
     let resume = read_resume(&args, &plan, &scene, &options)?;
     let ctx = Context::new(&args.adapter)?;
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;

@@ -53,8 +53,9 @@ fn v4(v: DVec3, w: f64) -> [f32; 4] {
     [v.x as f32, v.y as f32, v.z as f32, w as f32]
 }
 
-/// The patch table. `first_shot`: whether area lights are first-shot lights (their emission
-/// is then left out of the iteration) or plain emitters.
+/// The patch table. `first_shot`: whether area lights and the first-shot triangles of
+/// emitting shapes are first-shot lights (their emission is then left out of the iteration)
+/// or plain emitters.
 pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<GpuPatch> {
     let black = scene.materials.len() as u32;
     patches
@@ -65,7 +66,7 @@ pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<Gp
             if p.twin {
                 flags |= PATCH_TWIN;
             }
-            if first_shot && matches!(p.kind, PatchKind::AreaLight { .. }) {
+            if first_shot && matches!(p.kind, PatchKind::AreaLight { .. } | PatchKind::Emitter { .. }) {
                 flags |= PATCH_FIRST_SHOT_LIGHT;
             }
             GpuPatch {

@@ -5,10 +5,25 @@
 //! the source's without a gap. An area light is meshed on its own n x n grid, whatever the
 //! patch size: its vertices are the first shot's samples, and the trapezoid weights need
 //! exactly that grid.
+//!
+//! A shape with `emission` is a first-shot light too (docs/ALGORITHM.md 1, "Emitting
+//! shapes"): every emitting side of its triangles gets a triangular grid of light samples
+//! of its own (`emitter_grid` says how fine), up to `MAX_EMITTER_SAMPLES` for the scene.
 
 use super::{Light, Rgb, Scene, Triangle};
 use crate::{Error, Result};
 use glam::DVec3;
+use std::collections::HashMap;
+
+/// The first-shot samples that emitting shapes share out by power: a triangle side that
+/// emits a share s of all the shapes' emitted power gets a grid of at most about s times
+/// this many samples (and never fewer than its three corners).
+pub const EMITTER_SAMPLE_SHARE: f64 = 64.0;
+
+/// The most first-shot samples on emitting shapes (before shared corners are merged). The
+/// strongest triangle sides come first; those past the cap emit inside the iteration, as
+/// with `--no-first-shot`, and `Patches::notes` says how many and how much power.
+pub const MAX_EMITTER_SAMPLES: u64 = 4096;
 
 /// The most patches a tessellation may produce (33 million). Each costs about 150 bytes on
 /// the host and 200 on the GPU, so beyond it a scene outgrows the memory of the machines
@@ -23,6 +38,11 @@ pub enum PatchKind {
     /// A triangle of an area light's n x n grid: it emits `radiance` on its front, reflects
     /// nothing (black material) and occludes like any surface.
     AreaLight { light: u32 },
+    /// A triangle of an emitting `[[shapes]]` entry whose emission is a first-shot light:
+    /// `Patches::emitters[emitter]`. It reflects with its material like any surface patch;
+    /// with first shot its emission is left out of the iteration (its first reflection
+    /// replaces it) and the camera sees it directly.
+    Emitter { surface: u32, emitter: u32 },
 }
 
 /// One triangular patch: the unit of the finite-element radiance representation.
@@ -54,7 +74,8 @@ pub struct LightSample {
     /// w_i: for an area-light vertex, (area of the light triangles sharing it) / 3; 1 for a
     /// point light.
     pub weight: f64,
-    /// Index into `Scene::lights`.
+    /// The source: an index into `Scene::lights`, or for a sample on an emitting shape,
+    /// `Scene::lights.len()` + its index in `Patches::emitters`.
     pub light: u32,
 }
 
@@ -63,8 +84,9 @@ pub struct LightSample {
 pub enum SampleKind {
     /// A point light: a full cube window, S_i = power.
     Point,
-    /// A vertex of an area light's mesh, with the light's unit normal: a window above the
-    /// light, S_i = radiance, the trapezoid weight in `LightSample::weight`.
+    /// A vertex of an area light's mesh or of an emitting triangle's grid, with that
+    /// surface's unit normal: a window above it, S_i = radiance, the trapezoid weight in
+    /// `LightSample::weight`.
     AreaVertex { normal: DVec3 },
 }
 
@@ -73,11 +95,38 @@ pub enum SampleKind {
 /// Order: the surfaces' patches in the order of `Scene::surfaces` and their triangles (a
 /// twin right after its patch), then the area lights' patches in the order of
 /// `Scene::lights`; the samples in the order of `Scene::lights`, an area light's row by row
-/// from v0 (index j (n + 1) + i for the vertex i steps from v0 towards v1 and j towards v3).
+/// from v0 (index j (n + 1) + i for the vertex i steps from v0 towards v1 and j towards v3),
+/// then the emitters' samples in the order of `emitters`.
 #[derive(Debug, Clone, Default)]
 pub struct Patches {
     pub patches: Vec<Patch>,
     pub samples: Vec<LightSample>,
+    /// The emitting shapes whose emission is first shot, one per shape (`PatchKind::Emitter`).
+    pub emitters: Vec<Emitter>,
+    /// One line each about what tessellation could not do as asked (emitters past the cap).
+    pub notes: Vec<String>,
+}
+
+/// An emitting shape as a first-shot light: the sides of its triangles that emit, each a
+/// planar one-sided Lambertian emitter of the shape's radiance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Emitter {
+    /// Index into `Scene::surfaces`.
+    pub surface: u32,
+    pub radiance: Rgb,
+    pub triangles: Vec<EmitterTriangle>,
+}
+
+/// One emitting side of a source triangle (a two-sided shape's back is the triangle with its
+/// winding reversed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EmitterTriangle {
+    /// Counter-clockwise seen from the emitting side.
+    pub vertices: [DVec3; 3],
+    pub normal: DVec3,
+    pub area: f64,
+    /// k: the side's sample grid cuts each edge into k ((k + 1)(k + 2) / 2 samples).
+    pub grid: u32,
 }
 
 /// A summary for progress output and `--stats`.
@@ -160,20 +209,30 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
         })
         .sum();
 
-    let mut out = Patches { patches: Vec::with_capacity(count as usize), samples: Vec::with_capacity(sample_count) };
+    let plan = plan_emitters(scene, patch_size)?;
+    let mut out = Patches {
+        patches: Vec::with_capacity(count as usize),
+        samples: Vec::with_capacity(sample_count),
+        emitters: Vec::with_capacity(plan.emitters.len()),
+        notes: plan.notes,
+    };
     for (s, surface) in scene.surfaces.iter().enumerate() {
         for (t, triangle) in surface.triangles.iter().enumerate() {
             let source = SourceTriangle::new(scene, s, t, triangle)?;
+            let kind = |back: bool| match plan.first_shot.get(&(s as u32, t as u32, back)) {
+                Some(&emitter) => PatchKind::Emitter { surface: s as u32, emitter },
+                None => PatchKind::Surface { surface: s as u32 },
+            };
             let base = Patch {
                 vertices: triangle.vertices,
                 normal: source.normal,
                 area: 0.0,
                 material: Some(triangle.material),
                 emission: surface.emission,
-                kind: PatchKind::Surface { surface: s as u32 },
+                kind: kind(false),
                 twin: surface.two_sided,
             };
-            source.split_into(&base, patch_size, &mut out.patches);
+            source.split_into(&base, kind(true), patch_size, &mut out.patches);
         }
     }
     for (l, light) in scene.lights.iter().enumerate() {
@@ -190,7 +249,166 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
             }
         }
     }
+    for (e, emitter) in plan.emitters.into_iter().enumerate() {
+        emitter_samples(&emitter, (scene.lights.len() + e) as u32, &mut out.samples);
+        out.emitters.push(emitter);
+    }
     Ok(out)
+}
+
+/// Which emitting triangle sides are first-shot lights, and their grids.
+struct EmitterPlan {
+    emitters: Vec<Emitter>,
+    /// (surface, triangle, back side) -> index into `emitters`.
+    first_shot: HashMap<(u32, u32, bool), u32>,
+    notes: Vec<String>,
+}
+
+/// The largest k >= 1 whose triangular grid, (k + 1)(k + 2) / 2 samples, has at most `n`.
+fn grid_for_samples(n: f64) -> u64 {
+    let k = ((-3.0 + (1.0 + 8.0 * n.max(0.0)).sqrt()) / 2.0).floor();
+    if k.is_finite() { (k as u64).max(1) } else { 1 }
+}
+
+fn grid_samples(k: u64) -> u64 {
+    (k + 1) * (k + 2) / 2
+}
+
+/// Every emitting side of every shape's triangles, strongest first (power pi A mean(Le)),
+/// gets a grid of k x k congruent cells (`split_into`'s lattice) whose corners are its
+/// samples, with
+///
+///     k = min(k_area, k_power)
+///
+/// k_area: the least k that cuts its longest edge to at most the patch size (the grid is as
+///         fine as the surfaces' patches, no finer);
+/// k_power: the largest k >= 1 with at most `EMITTER_SAMPLE_SHARE` x (its share of the
+///         emitting shapes' power) samples, so weak emitters get coarse grids.
+///
+/// Sides are taken in that order until the next one would pass `MAX_EMITTER_SAMPLES`; the
+/// rest stay emitters of the iteration, reported in one note.
+fn plan_emitters(scene: &Scene, patch_size: f64) -> Result<EmitterPlan> {
+    struct Side {
+        surface: u32,
+        triangle: u32,
+        back: bool,
+        vertices: [DVec3; 3],
+        normal: DVec3,
+        area: f64,
+        power: f64,
+        k_area: u64,
+    }
+    let mut sides = Vec::new();
+    for (s, surface) in scene.surfaces.iter().enumerate() {
+        let mean = surface.emission.iter().map(|&c| c as f64).sum::<f64>() / 3.0;
+        if !(mean > 0.0) {
+            continue;
+        }
+        for (t, triangle) in surface.triangles.iter().enumerate() {
+            let source = SourceTriangle::new(scene, s, t, triangle)?;
+            let power = std::f64::consts::PI * source.area * mean;
+            let k_area = source.splits(patch_size);
+            let [a, b, c] = triangle.vertices;
+            for back in [false, true].into_iter().take(if surface.two_sided { 2 } else { 1 }) {
+                let (vertices, normal) = if back { ([a, c, b], -source.normal) } else { ([a, b, c], source.normal) };
+                sides.push(Side {
+                    surface: s as u32,
+                    triangle: t as u32,
+                    back,
+                    vertices,
+                    normal,
+                    area: source.area,
+                    power,
+                    k_area,
+                });
+            }
+        }
+    }
+    let total_power: f64 = sides.iter().map(|side| side.power).sum();
+    let mut order: Vec<usize> = (0..sides.len()).collect();
+    order.sort_by(|&a, &b| sides[b].power.total_cmp(&sides[a].power));
+    let (mut used, mut grids) = (0u64, vec![None; sides.len()]);
+    for &i in &order {
+        let side = &sides[i];
+        let k_power = grid_for_samples(EMITTER_SAMPLE_SHARE * side.power / total_power);
+        let k = side.k_area.min(k_power);
+        if used + grid_samples(k) > MAX_EMITTER_SAMPLES {
+            break;
+        }
+        used += grid_samples(k);
+        grids[i] = Some(k as u32);
+    }
+    let mut plan = EmitterPlan { emitters: Vec::new(), first_shot: HashMap::new(), notes: Vec::new() };
+    for (side, grid) in sides.iter().zip(&grids) {
+        let Some(grid) = *grid else { continue };
+        if plan.emitters.last().is_none_or(|e: &Emitter| e.surface != side.surface) {
+            let radiance = scene.surfaces[side.surface as usize].emission;
+            plan.emitters.push(Emitter { surface: side.surface, radiance, triangles: Vec::new() });
+        }
+        let e = plan.emitters.len() - 1;
+        plan.emitters[e].triangles.push(EmitterTriangle {
+            vertices: side.vertices,
+            normal: side.normal,
+            area: side.area,
+            grid,
+        });
+        plan.first_shot.insert((side.surface, side.triangle, side.back), e as u32);
+    }
+    let left = grids.iter().filter(|g| g.is_none()).count();
+    if left > 0 {
+        let power: f64 = sides.iter().zip(&grids).filter(|(_, g)| g.is_none()).map(|(s, _)| s.power).sum();
+        plan.notes.push(format!(
+            "{left} of {} emitting triangle sides ({:.1} % of the emitting shapes' power) are past the \
+             first shot's cap of {MAX_EMITTER_SAMPLES} samples on emitting shapes: they emit inside \
+             the iteration instead",
+            sides.len(),
+            100.0 * power / total_power
+        ));
+    }
+    Ok(plan)
+}
+
+/// The samples of an emitter: the corners of every side's k x k grid of congruent cells,
+/// each weighted by a third of the area of the cells around it (the trapezoid rule, as on an
+/// area light). A corner that sides share (same position and normal: a flat part of the
+/// shape) is one sample with their weights added.
+fn emitter_samples(emitter: &Emitter, light: u32, samples: &mut Vec<LightSample>) {
+    let first = samples.len();
+    let mut index: HashMap<([u64; 3], [u64; 3]), usize> = HashMap::new();
+    for side in &emitter.triangles {
+        let k = side.grid as u64;
+        let [v0, v1, v2] = side.vertices;
+        let kf = k as f64;
+        let at = |i: u64, j: u64| v0 + (v1 - v0) * (i as f64 / kf) + (v2 - v0) * (j as f64 / kf);
+        let third = side.area / (kf * kf) / 3.0;
+        let normal = side.normal;
+        let mut add = |p: DVec3| {
+            let key = (p.to_array().map(f64::to_bits), normal.to_array().map(f64::to_bits));
+            let i = *index.entry(key).or_insert_with(|| {
+                samples.push(LightSample {
+                    position: p,
+                    kind: SampleKind::AreaVertex { normal },
+                    strength: emitter.radiance,
+                    weight: 0.0,
+                    light,
+                });
+                samples.len() - 1 - first
+            });
+            samples[first + i].weight += third;
+        };
+        for j in 0..k {
+            for i in 0..k - j {
+                for p in [at(i, j), at(i + 1, j), at(i, j + 1)] {
+                    add(p);
+                }
+                if i + j + 2 <= k {
+                    for p in [at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)] {
+                        add(p);
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// The bounding sphere of every patch vertex and light sample: the centre of their
@@ -251,7 +469,7 @@ impl SourceTriangle {
     /// Appends the k^2 patches (and twins): on the lattice v0 + (i e1 + j e2) / k, the
     /// "upright" triangles are translates of the source scaled by 1/k and the "inverted"
     /// ones are those rotated by 180 degrees in its plane, so all keep its winding.
-    fn split_into(&self, base: &Patch, patch_size: f64, out: &mut Vec<Patch>) {
+    fn split_into(&self, base: &Patch, twin_kind: PatchKind, patch_size: f64, out: &mut Vec<Patch>) {
         let k = self.splits(patch_size);
         let [v0, v1, v2] = self.vertices;
         let kf = k as f64;
@@ -263,7 +481,7 @@ impl SourceTriangle {
             out.push(patch);
             if base.twin {
                 let [a, b, c] = vertices;
-                out.push(Patch { vertices: [a, c, b], normal: -self.normal, ..patch });
+                out.push(Patch { vertices: [a, c, b], normal: -self.normal, kind: twin_kind, ..patch });
             }
         };
         if k == 1 {
@@ -479,7 +697,8 @@ pub(crate) mod tests {
                 assert!(winding.dot(p.normal) > 1.0 - 1e-9);
                 assert_eq!(p.material, Some(0));
                 assert_eq!(p.emission, [0.25, 0.5, 1.0]);
-                assert_eq!(p.kind, PatchKind::Surface { surface: 0 });
+                // It emits, so its emission is a first-shot light.
+                assert_eq!(p.kind, PatchKind::Emitter { surface: 0, emitter: 0 });
                 assert!(!p.twin);
             }
             next += k * k;
@@ -706,7 +925,8 @@ pub(crate) mod tests {
                 other => panic!("shape type {other} is not read by this test"),
             };
             let two_sided = shape.get("two_sided").is_some_and(|v| v.as_bool().unwrap());
-            surfaces.push(surface(&triangles, two_sided));
+            let emission = shape.get("emission").map_or([0.0; 3], colour);
+            surfaces.push(Surface { emission, ..surface(&triangles, two_sided) });
         }
         let mut lights = Vec::new();
         for light in table.get("lights").and_then(|l| l.as_array()).into_iter().flatten() {
@@ -750,10 +970,119 @@ pub(crate) mod tests {
         }
     }
 
+    fn emitting(triangles: &[[DVec3; 3]], emission: Rgb, two_sided: bool) -> Surface {
+        Surface { emission, ..surface(triangles, two_sided) }
+    }
+
+    fn quad_triangles([v0, v1, v2, v3]: [DVec3; 4]) -> Vec<[DVec3; 3]> {
+        vec![[v0, v1, v2], [v0, v2, v3]]
+    }
+
+    #[test]
+    fn emitting_quad_gets_the_area_lights_samples() {
+        // The same quad as an area light with n x n cells and as an emitting shape whose
+        // grid the patch size makes n x n: the same sample points, normals and weights.
+        let Light::Area { vertices, .. } = square_light(0.8, 1) else { unreachable!() };
+        let diagonal = vertices[0].distance(vertices[2]);
+        for n in [1u32, 2, 3] {
+            let light = Light::Area { vertices, radiance: [2.0; 3], subdivisions: n };
+            let area = tessellate(&scene_of(vec![], vec![light]), 1.0).unwrap();
+            let shape = scene_of(vec![emitting(&quad_triangles(vertices), [2.0; 3], false)], vec![]);
+            let emitter = tessellate(&shape, diagonal / n as f64).unwrap();
+            assert_eq!(emitter.emitters.len(), 1);
+            assert!(emitter.emitters[0].triangles.iter().all(|t| t.grid == n));
+            assert_eq!(emitter.samples.len(), area.samples.len(), "shared corners are merged");
+            for a in &area.samples {
+                let same: Vec<_> =
+                    emitter.samples.iter().filter(|e| e.position.distance(a.position) <= ROUNDING).collect();
+                assert_eq!(same.len(), 1, "n = {n}: one emitter sample at {}", a.position);
+                let (SampleKind::AreaVertex { normal: na }, SampleKind::AreaVertex { normal: ne }) =
+                    (a.kind, same[0].kind)
+                else {
+                    panic!("area samples")
+                };
+                assert!(na.dot(ne) > 1.0 - 1e-12);
+                assert!((a.weight - same[0].weight).abs() <= ROUNDING, "{} vs {}", a.weight, same[0].weight);
+                assert_eq!(same[0].strength, [2.0; 3]);
+                assert_eq!(same[0].light, 0, "lights.len() + emitter 0");
+            }
+            for p in &emitter.patches {
+                assert_eq!(p.kind, PatchKind::Emitter { surface: 0, emitter: 0 });
+                assert_eq!(p.material, Some(0), "an emitting shape keeps its material");
+            }
+        }
+    }
+
+    #[test]
+    fn emitter_grids_follow_area_and_power() {
+        // Two emitting shapes, one 9 times as strong: their sample weights add up to their
+        // areas, and k = min(k_area, k_power) on each.
+        let tri = |x: f64| [DVec3::new(x, 0.0, 0.0), DVec3::new(x + 1.0, 0.0, 0.0), DVec3::new(x, 1.0, 0.0)];
+        let strong = emitting(&[tri(0.0)], [9.0; 3], false);
+        let weak = emitting(&[tri(5.0)], [1.0; 3], true);
+        let scene = scene_of(vec![strong, weak], vec![]);
+        for patch_size in [f64::INFINITY, 0.2, 0.05] {
+            let patches = tessellate(&scene, patch_size).unwrap();
+            assert_eq!(patches.emitters.len(), 2);
+            let k_area = |p: f64| if p.is_infinite() { 1 } else { (2f64.sqrt() / p).ceil() as u32 };
+            // Power shares: strong 9 / 11 of one side, weak 1 / 11 on each of its two sides.
+            let k_power = |share: f64| grid_for_samples(EMITTER_SAMPLE_SHARE * share) as u32;
+            assert_eq!(patches.emitters[0].triangles[0].grid, k_area(patch_size).min(k_power(9.0 / 11.0)));
+            assert_eq!(patches.emitters[1].triangles.len(), 2, "both sides of a two-sided emitter");
+            for t in &patches.emitters[1].triangles {
+                assert_eq!(t.grid, k_area(patch_size).min(k_power(1.0 / 11.0)));
+            }
+            let normals: Vec<_> = patches.emitters[1].triangles.iter().map(|t| t.normal).collect();
+            assert_eq!(normals, [DVec3::Z, DVec3::NEG_Z]);
+            for (e, emitter) in patches.emitters.iter().enumerate() {
+                let weights: f64 = patches.samples.iter().filter(|s| s.light == e as u32).map(|s| s.weight).sum();
+                let area: f64 = emitter.triangles.iter().map(|t| t.area).sum();
+                assert!((weights - area).abs() <= ROUNDING, "{weights} vs {area}");
+            }
+            for p in &patches.patches {
+                let expected = if p.vertices[0].x < 2.0 { 0 } else { 1 };
+                assert_eq!(p.kind, PatchKind::Emitter { surface: expected, emitter: expected });
+            }
+        }
+        // k_power's own values: the largest k with (k + 1)(k + 2) / 2 <= n, at least 1.
+        let ks: Vec<u64> = [0.0, 2.9, 3.0, 5.9, 6.0, 10.0, 32.0, 64.0].map(grid_for_samples).to_vec();
+        assert_eq!(ks, [1, 1, 1, 1, 2, 3, 6, 9]);
+    }
+
+    #[test]
+    fn emitters_past_the_cap_stay_in_the_iteration_with_a_note() {
+        // More emitting triangles than the cap has samples for (3 each at k = 1): the
+        // brightest are first shot, the rest are plain surface patches, and a note says so.
+        let count = (MAX_EMITTER_SAMPLES / 3 + 10) as usize;
+        let tri = |i: usize| {
+            let x = i as f64 * 2.0;
+            [DVec3::new(x, 0.0, 0.0), DVec3::new(x + 1.0, 0.0, 0.0), DVec3::new(x, 1.0, 0.0)]
+        };
+        let dim = emitting(&(0..10).map(tri).collect::<Vec<_>>(), [0.5; 3], false);
+        let bright = emitting(&(10..count).map(tri).collect::<Vec<_>>(), [1.0; 3], false);
+        let patches = tessellate(&scene_of(vec![dim, bright], vec![]), f64::INFINITY).unwrap();
+        assert_eq!(patches.samples.len() as u64, 3 * (MAX_EMITTER_SAMPLES / 3));
+        assert_eq!(patches.emitters.len(), 1, "only the bright shape is first shot");
+        assert_eq!(patches.emitters[0].surface, 1);
+        assert!(patches.patches[..10].iter().all(|p| p.kind == PatchKind::Surface { surface: 0 }));
+        assert!(patches.patches[10..].iter().all(|p| matches!(p.kind, PatchKind::Emitter { surface: 1, .. })));
+        assert_eq!(patches.notes.len(), 1);
+        assert!(patches.notes[0].starts_with("10 of "), "{}", patches.notes[0]);
+    }
+
+    #[test]
+    fn shapes_without_emission_are_no_emitters() {
+        let mut dark = surface(&random_triangles(3, 4), false);
+        dark.emission = [0.0; 3];
+        let patches = tessellate(&scene_of(vec![dark], vec![]), 1.0).unwrap();
+        assert!(patches.emitters.is_empty() && patches.samples.is_empty() && patches.notes.is_empty());
+    }
+
     #[test]
     fn stats_count_and_add_up() {
         let triangles = random_triangles(5, 4);
-        let scene = scene_of(vec![surface(&triangles, true)], vec![square_light(0.5, 3)]);
+        let dark = Surface { emission: [0.0; 3], ..surface(&triangles, true) };
+        let scene = scene_of(vec![dark], vec![square_light(0.5, 3)]);
         let patches = tessellate(&scene, 2.0).unwrap();
         let stats = patches.stats();
         assert_eq!(stats.light_patches, 18);
