@@ -79,7 +79,8 @@ struct RenderArgs {
     /// comes first).
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     time: Option<f64>,
-    /// Solve the area lights as emitters inside the iteration instead of first shot.
+    /// Solve the area lights and emitting shapes as emitters inside the iteration instead of
+    /// first shot.
     #[arg(long)]
     no_first_shot: bool,
     /// Pixels along an edge of each parallel projection of the iteration.
