@@ -255,3 +255,4 @@ fn test02_room_lit_by_an_emitting_quad_converges_like_the_same_area_light() {
         by_shape.relative_rmse
     );
 }
+

@@ -17,10 +17,10 @@ use std::collections::HashMap;
 
 /// The first-shot samples that emitting shapes share out by power: a triangle side that
 /// emits a share s of all the shapes' emitted power gets a grid of at most about s times
-/// this many samples (and never fewer than its three corners).
+/// this many samples (and never fewer than one).
 pub const EMITTER_SAMPLE_SHARE: f64 = 64.0;
 
-/// The most first-shot samples on emitting shapes (before shared corners are merged). The
+/// The most first-shot samples on emitting shapes. The
 /// strongest triangle sides come first; those past the cap emit inside the iteration, as
 /// with `--no-first-shot`, and `Patches::notes` says how many and how much power.
 pub const MAX_EMITTER_SAMPLES: u64 = 4096;
@@ -84,9 +84,9 @@ pub struct LightSample {
 pub enum SampleKind {
     /// A point light: a full cube window, S_i = power.
     Point,
-    /// A vertex of an area light's mesh or of an emitting triangle's grid, with that
-    /// surface's unit normal: a window above it, S_i = radiance, the trapezoid weight in
-    /// `LightSample::weight`.
+    /// A vertex of an area light's mesh (with the trapezoid weight) or the centre of a cell of
+    /// an emitting triangle's grid (with the cell's area), and that surface's unit normal: a
+    /// window above it, S_i = radiance, the weight in `LightSample::weight`.
     AreaVertex { normal: DVec3 },
 }
 
@@ -125,7 +125,7 @@ pub struct EmitterTriangle {
     pub vertices: [DVec3; 3],
     pub normal: DVec3,
     pub area: f64,
-    /// k: the side's sample grid cuts each edge into k ((k + 1)(k + 2) / 2 samples).
+    /// k: the side's sample grid cuts each edge into k (k^2 cells, a sample at each centre).
     pub grid: u32,
 }
 
@@ -264,26 +264,26 @@ struct EmitterPlan {
     notes: Vec<String>,
 }
 
-/// The largest k >= 1 whose triangular grid, (k + 1)(k + 2) / 2 samples, has at most `n`.
+/// The largest k >= 1 whose grid, k^2 cells and as many samples, has at most `n`.
 fn grid_for_samples(n: f64) -> u64 {
-    let k = ((-3.0 + (1.0 + 8.0 * n.max(0.0)).sqrt()) / 2.0).floor();
+    let k = n.max(0.0).sqrt().floor();
     if k.is_finite() { (k as u64).max(1) } else { 1 }
 }
 
 fn grid_samples(k: u64) -> u64 {
-    (k + 1) * (k + 2) / 2
+    k * k
 }
 
 /// Every emitting side of every shape's triangles, strongest first (power pi A mean(Le)),
-/// gets a grid of k x k congruent cells (`split_into`'s lattice) whose corners are its
-/// samples, with
+/// gets a grid of k x k congruent cells (`split_into`'s lattice), one sample at the centre
+/// of each, with
 ///
 ///     k = min(k_area, k_power)
 ///
 /// k_area: the least k that cuts its longest edge to at most the patch size (the grid is as
 ///         fine as the surfaces' patches, no finer);
-/// k_power: the largest k >= 1 with at most `EMITTER_SAMPLE_SHARE` x (its share of the
-///         emitting shapes' power) samples, so weak emitters get coarse grids.
+/// k_power: the largest k >= 1 with k^2 <= `EMITTER_SAMPLE_SHARE` x (its share of the
+///         emitting shapes' power), so weak emitters get coarse grids.
 ///
 /// Sides are taken in that order until the next one would pass `MAX_EMITTER_SAMPLES`; the
 /// rest stay emitters of the iteration, reported in one note.
@@ -368,43 +368,32 @@ fn plan_emitters(scene: &Scene, patch_size: f64) -> Result<EmitterPlan> {
     Ok(plan)
 }
 
-/// The samples of an emitter: the corners of every side's k x k grid of congruent cells,
-/// each weighted by a third of the area of the cells around it (the trapezoid rule, as on an
-/// area light). A corner that sides share (same position and normal: a flat part of the
-/// shape) is one sample with their weights added.
+/// The samples of an emitter: the centre of every cell of every side's k x k grid, weighted
+/// by the cell's area (the midpoint rule). Not the cells' corners, as on an area light: a
+/// corner on the edge of an emitting shape can lie on another surface (an emitting floor
+/// meets the walls), and the part of its window behind that surface, which the surface
+/// would receive from points just inside the edge, would see nothing at all.
 fn emitter_samples(emitter: &Emitter, light: u32, samples: &mut Vec<LightSample>) {
-    let first = samples.len();
-    let mut index: HashMap<([u64; 3], [u64; 3]), usize> = HashMap::new();
     for side in &emitter.triangles {
         let k = side.grid as u64;
         let [v0, v1, v2] = side.vertices;
         let kf = k as f64;
         let at = |i: u64, j: u64| v0 + (v1 - v0) * (i as f64 / kf) + (v2 - v0) * (j as f64 / kf);
-        let third = side.area / (kf * kf) / 3.0;
-        let normal = side.normal;
-        let mut add = |p: DVec3| {
-            let key = (p.to_array().map(f64::to_bits), normal.to_array().map(f64::to_bits));
-            let i = *index.entry(key).or_insert_with(|| {
-                samples.push(LightSample {
-                    position: p,
-                    kind: SampleKind::AreaVertex { normal },
-                    strength: emitter.radiance,
-                    weight: 0.0,
-                    light,
-                });
-                samples.len() - 1 - first
+        let cell = side.area / (kf * kf);
+        let mut add = |[a, b, c]: [DVec3; 3]| {
+            samples.push(LightSample {
+                position: (a + b + c) / 3.0,
+                kind: SampleKind::AreaVertex { normal: side.normal },
+                strength: emitter.radiance,
+                weight: cell,
+                light,
             });
-            samples[first + i].weight += third;
         };
         for j in 0..k {
             for i in 0..k - j {
-                for p in [at(i, j), at(i + 1, j), at(i, j + 1)] {
-                    add(p);
-                }
+                add([at(i, j), at(i + 1, j), at(i, j + 1)]);
                 if i + j + 2 <= k {
-                    for p in [at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)] {
-                        add(p);
-                    }
+                    add([at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)]);
                 }
             }
         }
@@ -979,34 +968,33 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn emitting_quad_gets_the_area_lights_samples() {
-        // The same quad as an area light with n x n cells and as an emitting shape whose
-        // grid the patch size makes n x n: the same sample points, normals and weights.
+    fn emitting_quad_samples_are_its_cells_centres() {
+        // The quad of an area light as an emitting shape whose grid the patch size makes
+        // n x n per triangle: n^2 samples per triangle, each at a cell's centre, strictly
+        // inside the quad, weighted by the cell's area.
         let Light::Area { vertices, .. } = square_light(0.8, 1) else { unreachable!() };
         let diagonal = vertices[0].distance(vertices[2]);
         for n in [1u32, 2, 3] {
-            let light = Light::Area { vertices, radiance: [2.0; 3], subdivisions: n };
-            let area = tessellate(&scene_of(vec![], vec![light]), 1.0).unwrap();
             let shape = scene_of(vec![emitting(&quad_triangles(vertices), [2.0; 3], false)], vec![]);
-            let emitter = tessellate(&shape, diagonal / n as f64).unwrap();
-            assert_eq!(emitter.emitters.len(), 1);
-            assert!(emitter.emitters[0].triangles.iter().all(|t| t.grid == n));
-            assert_eq!(emitter.samples.len(), area.samples.len(), "shared corners are merged");
-            for a in &area.samples {
-                let same: Vec<_> =
-                    emitter.samples.iter().filter(|e| e.position.distance(a.position) <= ROUNDING).collect();
-                assert_eq!(same.len(), 1, "n = {n}: one emitter sample at {}", a.position);
-                let (SampleKind::AreaVertex { normal: na }, SampleKind::AreaVertex { normal: ne }) =
-                    (a.kind, same[0].kind)
-                else {
-                    panic!("area samples")
-                };
-                assert!(na.dot(ne) > 1.0 - 1e-12);
-                assert!((a.weight - same[0].weight).abs() <= ROUNDING, "{} vs {}", a.weight, same[0].weight);
-                assert_eq!(same[0].strength, [2.0; 3]);
-                assert_eq!(same[0].light, 0, "lights.len() + emitter 0");
+            let patches = tessellate(&shape, diagonal / n as f64).unwrap();
+            assert_eq!(patches.emitters.len(), 1);
+            assert!(patches.emitters[0].triangles.iter().all(|t| t.grid == n));
+            assert_eq!(patches.samples.len(), 2 * (n * n) as usize);
+            let cell = 0.8 * 0.8 / (2 * n * n) as f64;
+            let h = 0.8 / n as f64;
+            for s in &patches.samples {
+                assert_eq!(s.kind, SampleKind::AreaVertex { normal: DVec3::NEG_Y });
+                assert!((s.weight - cell).abs() <= ROUNDING);
+                assert_eq!((s.strength, s.light), ([2.0; 3], 0), "lights.len() + emitter 0");
+                // A cell's centre lies a third of the cell's side from its legs (and nearer
+                // no edge of the quad): in the lattice's coordinates, fractions of 1/3 or 2/3.
+                let (x, z) = (s.position.x / h, s.position.z / h);
+                for f in [x.fract(), z.fract()] {
+                    assert!((f - 1.0 / 3.0).abs() < 1e-9 || (f - 2.0 / 3.0).abs() < 1e-9, "{}", s.position);
+                }
+                assert!(s.position.x > 0.0 && s.position.x < 0.8 && s.position.z > 0.0 && s.position.z < 0.8);
             }
-            for p in &emitter.patches {
+            for p in &patches.patches {
                 assert_eq!(p.kind, PatchKind::Emitter { surface: 0, emitter: 0 });
                 assert_eq!(p.material, Some(0), "an emitting shape keeps its material");
             }
@@ -1044,16 +1032,16 @@ pub(crate) mod tests {
                 assert_eq!(p.kind, PatchKind::Emitter { surface: expected, emitter: expected });
             }
         }
-        // k_power's own values: the largest k with (k + 1)(k + 2) / 2 <= n, at least 1.
-        let ks: Vec<u64> = [0.0, 2.9, 3.0, 5.9, 6.0, 10.0, 32.0, 64.0].map(grid_for_samples).to_vec();
-        assert_eq!(ks, [1, 1, 1, 1, 2, 3, 6, 9]);
+        // k_power's own values: the largest k with k^2 <= n, at least 1.
+        let ks: Vec<u64> = [0.0, 3.9, 4.0, 8.9, 9.0, 10.0, 32.0, 64.0].map(grid_for_samples).to_vec();
+        assert_eq!(ks, [1, 1, 2, 2, 3, 3, 5, 8]);
     }
 
     #[test]
     fn emitters_past_the_cap_stay_in_the_iteration_with_a_note() {
-        // More emitting triangles than the cap has samples for (3 each at k = 1): the
+        // More emitting triangles than the cap has samples for (one each at k = 1): the
         // brightest are first shot, the rest are plain surface patches, and a note says so.
-        let count = (MAX_EMITTER_SAMPLES / 3 + 10) as usize;
+        let count = MAX_EMITTER_SAMPLES as usize + 10;
         let tri = |i: usize| {
             let x = i as f64 * 2.0;
             [DVec3::new(x, 0.0, 0.0), DVec3::new(x + 1.0, 0.0, 0.0), DVec3::new(x, 1.0, 0.0)]
@@ -1061,7 +1049,7 @@ pub(crate) mod tests {
         let dim = emitting(&(0..10).map(tri).collect::<Vec<_>>(), [0.5; 3], false);
         let bright = emitting(&(10..count).map(tri).collect::<Vec<_>>(), [1.0; 3], false);
         let patches = tessellate(&scene_of(vec![dim, bright], vec![]), f64::INFINITY).unwrap();
-        assert_eq!(patches.samples.len() as u64, 3 * (MAX_EMITTER_SAMPLES / 3));
+        assert_eq!(patches.samples.len() as u64, MAX_EMITTER_SAMPLES);
         assert_eq!(patches.emitters.len(), 1, "only the bright shape is first shot");
         assert_eq!(patches.emitters[0].surface, 1);
         assert!(patches.patches[..10].iter().all(|p| p.kind == PatchKind::Surface { surface: 0 }));
