@@ -54,6 +54,9 @@ enum Source {
     /// An area light or an emitting shape (`Patches::emitters`).
     Area {
         radiance: Rgb,
+        /// An emitting shape: its direct light is shared with the gather by multiple
+        /// importance sampling (docs/ALGORITHM.md 6), so the table holds T A_t.
+        shared: bool,
         /// The light's triangles (an area light's patches, an emitting shape's emitting
         /// triangle sides), their unit normals, areas and the random shifts of their
         /// low-discrepancy sequences.
@@ -146,7 +149,7 @@ impl DirectLights {
                         .map(|p| (p.vertices, p.normal, p.area, [shifts.uniform(), shifts.uniform()]))
                         .collect();
                     let centre = vertices.iter().sum::<DVec3>() / 4.0;
-                    sources.push((Source::Area { radiance, triangles }, centre));
+                    sources.push((Source::Area { radiance, shared: false, triangles }, centre));
                 }
             }
         }
@@ -160,7 +163,7 @@ impl DirectLights {
                 .map(|t| (t.vertices, t.normal, t.area, [shifts.uniform(), shifts.uniform()]))
                 .collect();
             let centre = triangles[0].0.iter().sum::<DVec3>() / 3.0;
-            sources.push((Source::Area { radiance: emitter.radiance, triangles }, centre));
+            sources.push((Source::Area { radiance: emitter.radiance, shared: true, triangles }, centre));
         }
         let near = buffers.radius * 1e-6;
         let max_side = ctx.limits().max_texture_dimension_2d;
@@ -305,14 +308,15 @@ impl DirectLights {
         }
         self.prepared = Some(pass);
         for (planned, entry) in self.lights.iter().zip(self.table.iter_mut()) {
-            let Source::Area { radiance, triangles } = &planned.source else { continue };
+            let Source::Area { radiance, shared, triangles } = &planned.source else { continue };
             let count = triangles.len() as u64;
             let (vertices, normal, area, shift) = triangles[(pass % count.max(1)) as usize];
             let [u1, u2] = r2_point(pass / count.max(1), shift);
             let y = point_in_triangle(vertices, u1, u2);
             let weight = (area * count as f64) as f32;
             entry.position = [y.x as f32, y.y as f32, y.z as f32, 0.0];
-            entry.normal = [normal.x as f32, normal.y as f32, normal.z as f32, 0.0];
+            let pick_area = if *shared { weight } else { 0.0 };
+            entry.normal = [normal.x as f32, normal.y as f32, normal.z as f32, pick_area];
             entry.strength = [radiance[0] * weight, radiance[1] * weight, radiance[2] * weight, 0.0];
             let r = self.resolution;
             let (faces, _) = first_shot::faces(&window_sample(&planned.source, y, normal), self.window, r, self.near);

@@ -77,10 +77,24 @@ pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<Gp
                 emission: [p.emission[0], p.emission[1], p.emission[2], 0.0],
                 material: p.material.unwrap_or(black),
                 flags,
-                _pad: [0; 2],
+                light_pick_area: light_pick_area(patches, p, first_shot) as f32,
+                _pad: 0,
             }
         })
         .collect()
+}
+
+/// T A_t for a patch of a first-shot emitting shape: the area that a direct-light pass's
+/// point on its triangle side t stands for, T being the number of the shape's sides
+/// (`direct_light.rs`); 0 for every other patch, and without first shot.
+pub fn light_pick_area(patches: &Patches, p: &crate::scene::Patch, first_shot: bool) -> f64 {
+    match p.kind {
+        PatchKind::Emitter { emitter, side, .. } if first_shot => {
+            let triangles = &patches.emitters[emitter as usize].triangles;
+            triangles.len() as f64 * triangles[side as usize].area
+        }
+        _ => 0.0,
+    }
 }
 
 /// Three vertices per patch with the patch id (and twin bit) for the rasterising stages.

@@ -41,8 +41,9 @@ pub enum PatchKind {
     /// A triangle of an emitting `[[shapes]]` entry whose emission is a first-shot light:
     /// `Patches::emitters[emitter]`. It reflects with its material like any surface patch;
     /// with first shot its emission is left out of the iteration (its first reflection
-    /// replaces it) and the camera sees it directly.
-    Emitter { surface: u32, emitter: u32 },
+    /// replaces it) and the camera sees it directly. `side`: its triangle side in
+    /// `Emitter::triangles`.
+    Emitter { surface: u32, emitter: u32, side: u32 },
 }
 
 /// One triangular patch: the unit of the finite-element radiance representation.
@@ -220,7 +221,7 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
         for (t, triangle) in surface.triangles.iter().enumerate() {
             let source = SourceTriangle::new(scene, s, t, triangle)?;
             let kind = |back: bool| match plan.first_shot.get(&(s as u32, t as u32, back)) {
-                Some(&emitter) => PatchKind::Emitter { surface: s as u32, emitter },
+                Some(&(emitter, side)) => PatchKind::Emitter { surface: s as u32, emitter, side },
                 None => PatchKind::Surface { surface: s as u32 },
             };
             let base = Patch {
@@ -259,8 +260,8 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
 /// Which emitting triangle sides are first-shot lights, and their grids.
 struct EmitterPlan {
     emitters: Vec<Emitter>,
-    /// (surface, triangle, back side) -> index into `emitters`.
-    first_shot: HashMap<(u32, u32, bool), u32>,
+    /// (surface, triangle, back side) -> (index into `emitters`, into its `triangles`).
+    first_shot: HashMap<(u32, u32, bool), (u32, u32)>,
     notes: Vec<String>,
 }
 
@@ -352,7 +353,8 @@ fn plan_emitters(scene: &Scene, patch_size: f64) -> Result<EmitterPlan> {
             area: side.area,
             grid,
         });
-        plan.first_shot.insert((side.surface, side.triangle, side.back), e as u32);
+        let index = (e as u32, plan.emitters[e].triangles.len() as u32 - 1);
+        plan.first_shot.insert((side.surface, side.triangle, side.back), index);
     }
     let left = grids.iter().filter(|g| g.is_none()).count();
     if left > 0 {
@@ -687,7 +689,7 @@ pub(crate) mod tests {
                 assert_eq!(p.material, Some(0));
                 assert_eq!(p.emission, [0.25, 0.5, 1.0]);
                 // It emits, so its emission is a first-shot light.
-                assert_eq!(p.kind, PatchKind::Emitter { surface: 0, emitter: 0 });
+                assert!(matches!(p.kind, PatchKind::Emitter { surface: 0, emitter: 0, .. }));
                 assert!(!p.twin);
             }
             next += k * k;
@@ -995,7 +997,7 @@ pub(crate) mod tests {
                 assert!(s.position.x > 0.0 && s.position.x < 0.8 && s.position.z > 0.0 && s.position.z < 0.8);
             }
             for p in &patches.patches {
-                assert_eq!(p.kind, PatchKind::Emitter { surface: 0, emitter: 0 });
+                assert!(matches!(p.kind, PatchKind::Emitter { surface: 0, emitter: 0, .. }));
                 assert_eq!(p.material, Some(0), "an emitting shape keeps its material");
             }
         }
@@ -1029,7 +1031,7 @@ pub(crate) mod tests {
             }
             for p in &patches.patches {
                 let expected = if p.vertices[0].x < 2.0 { 0 } else { 1 };
-                assert_eq!(p.kind, PatchKind::Emitter { surface: expected, emitter: expected });
+                assert!(matches!(p.kind, PatchKind::Emitter { surface, emitter, .. } if surface == expected && emitter == expected));
             }
         }
         // k_power's own values: the largest k with k^2 <= n, at least 1.
