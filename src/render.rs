@@ -645,13 +645,7 @@ impl<'a> Renderer<'a> {
             order.swap(i, pick);
         }
         // No gather adds its share of the emitting shapes' light: D takes all of it.
-        self.estimate.set_params(
-            queue,
-            self.scene.environment,
-            self.buffers.patch_count,
-            self.direct.count(),
-            false,
-        );
+        self.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, self.direct.count(), false);
         let mut done = DirectImage::default();
         for k in 0..passes {
             // Generators of their own, apart from the steps' (seed, k) streams.

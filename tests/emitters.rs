@@ -150,10 +150,8 @@ fn test01_non_planar_emitter_direct_light_converges_to_the_integral_over_its_fac
         }
     }
     let expected = Image::new(w, h, expected);
-    let (e4, e64) = (
-        image_error(&coarse, &expected).unwrap().relative_rmse,
-        image_error(&fine, &expected).unwrap().relative_rmse,
-    );
+    let (e4, e64) =
+        (image_error(&coarse, &expected).unwrap().relative_rmse, image_error(&fine, &expected).unwrap().relative_rmse);
     eprintln!("emitting pyramid, relative RMSE against the integral: {e4:.4} after 4 passes, {e64:.4} after 64");
     // The error falls with the passes, to a few per cent (as an area light's, per_pixel test02).
     assert!(e64 < e4 / 2.0 && e64 < 0.03, "{e4} after 4 passes, {e64} after 64");
@@ -200,14 +198,14 @@ material = "grey"
 
 /// The light quad, facing down, 1e-3 below the ceiling; its diagonal is 0.25 * sqrt(2), so
 /// the patch size 0.25 gives the emitting quad's grid 2 x 2, as the area light's.
-const QUAD: &str = "vertices = [[0.375, 0.999, 0.375], [0.625, 0.999, 0.375], [0.625, 0.999, 0.625], [0.375, 0.999, 0.625]]";
+const QUAD: &str =
+    "vertices = [[0.375, 0.999, 0.375], [0.625, 0.999, 0.375], [0.625, 0.999, 0.625], [0.375, 0.999, 0.625]]";
 
 #[test]
 fn test02_room_lit_by_an_emitting_quad_converges_like_the_same_area_light() {
     let area = room(&format!("[[lights]]\ntype = \"area\"\n{QUAD}\nradiance = [20.0, 20.0, 20.0]\nsubdivisions = 2\n"));
-    let shape = room(&format!(
-        "[[shapes]]\ntype = \"quad\"\n{QUAD}\nmaterial = \"black\"\nemission = [20.0, 20.0, 20.0]\n"
-    ));
+    let shape =
+        room(&format!("[[shapes]]\ntype = \"quad\"\n{QUAD}\nmaterial = \"black\"\nemission = [20.0, 20.0, 20.0]\n"));
     let (_a, area) = load("room_area", &area);
     let (_s, shape) = load("room_shape", &shape);
     let Some(ctx) = common::gpu() else { return };
@@ -255,7 +253,6 @@ fn test02_room_lit_by_an_emitting_quad_converges_like_the_same_area_light() {
         by_shape.relative_rmse
     );
 }
-
 
 #[test]
 fn test03_closed_furnace_of_first_shot_emitters_stays_exact_on_average() {

@@ -1031,7 +1031,9 @@ pub(crate) mod tests {
             }
             for p in &patches.patches {
                 let expected = if p.vertices[0].x < 2.0 { 0 } else { 1 };
-                assert!(matches!(p.kind, PatchKind::Emitter { surface, emitter, .. } if surface == expected && emitter == expected));
+                assert!(
+                    matches!(p.kind, PatchKind::Emitter { surface, emitter, .. } if surface == expected && emitter == expected)
+                );
             }
         }
         // k_power's own values: the largest k with k^2 <= n, at least 1.
