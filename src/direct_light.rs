@@ -1,8 +1,9 @@
 //! Per-pixel direct light (docs/ALGORITHM.md 6): the first-shot lights as the image estimate sees
 //! them, and the item buffers of their windows, which give each pixel its own visibility.
 //!
-//! A point light keeps its cube of six faces, rendered once. An area light gets a new point
-//! y on it every pass, and its window (hemicube or cubic tetrahedron, as `--light-window`) is
+//! A point light keeps its cube of six faces, rendered once. An area light (or an emitting
+//! shape, whose triangles may face different ways: the window is turned to the normal of
+//! the triangle that holds the point) gets a new point y on it every pass, and its window (hemicube or cubic tetrahedron, as `--light-window`) is
 //! rendered again there: pass k takes light triangle k mod T (of its T triangles, so every
 //! T passes visit each once) and a point in it, which stands for T times that triangle's
 //! area. The v-th visit of a triangle takes the v-th point of a low-discrepancy sequence (R2)
@@ -50,12 +51,16 @@ enum Source {
     Point {
         power: Rgb,
     },
+    /// An area light or an emitting shape (`Patches::emitters`).
     Area {
         radiance: Rgb,
-        normal: DVec3,
-        /// The light's triangles (its patches), their areas and the random shifts of their
+        /// An emitting shape: its direct light is shared with the gather by multiple
+        /// importance sampling (docs/ALGORITHM.md 6), so the table holds T A_t.
+        shared: bool,
+        /// The light's triangles (an area light's patches, an emitting shape's emitting
+        /// triangle sides), their unit normals, areas and the random shifts of their
         /// low-discrepancy sequences.
-        triangles: Vec<([DVec3; 3], f64, [f64; 2])>,
+        triangles: Vec<([DVec3; 3], DVec3, f64, [f64; 2])>,
     },
 }
 
@@ -105,10 +110,12 @@ fn point_in_triangle([a, b, c]: [DVec3; 3], u1: f64, u2: f64) -> DVec3 {
     (1.0 - r) * a + r * (1.0 - u2) * b + r * u2 * c
 }
 
-fn window_sample(source: &Source, position: DVec3) -> LightSample {
+/// A sample at `position` whose window is the source's: a cube for a point light, a window
+/// above `normal` (the normal of the triangle the point lies on) for an area source.
+fn window_sample(source: &Source, position: DVec3, normal: DVec3) -> LightSample {
     let kind = match source {
         Source::Point { .. } => SampleKind::Point,
-        Source::Area { normal, .. } => SampleKind::AreaVertex { normal: *normal },
+        Source::Area { .. } => SampleKind::AreaVertex { normal },
     };
     LightSample { position, kind, strength: [0.0; 3], weight: 1.0, light: 0 }
 }
@@ -133,15 +140,30 @@ impl DirectLights {
                 Light::Area { vertices, radiance, .. } => {
                     let own: Vec<_> =
                         patches.patches.iter().filter(|p| p.kind == PatchKind::AreaLight { light: l as u32 }).collect();
-                    let Some(first) = own.first() else { continue };
-                    let normal = first.normal;
+                    if own.is_empty() {
+                        continue;
+                    }
                     let mut shifts = StepRng::new(seed, SHIFT_STREAM - l as u64);
-                    let triangles =
-                        own.iter().map(|p| (p.vertices, p.area, [shifts.uniform(), shifts.uniform()])).collect();
+                    let triangles = own
+                        .iter()
+                        .map(|p| (p.vertices, p.normal, p.area, [shifts.uniform(), shifts.uniform()]))
+                        .collect();
                     let centre = vertices.iter().sum::<DVec3>() / 4.0;
-                    sources.push((Source::Area { radiance, normal, triangles }, centre));
+                    sources.push((Source::Area { radiance, shared: false, triangles }, centre));
                 }
             }
+        }
+        // Emitting shapes: their emitting triangle sides whole (not their patches: fewer
+        // triangles, the same points), each pass a point on one of them.
+        for (e, emitter) in patches.emitters.iter().enumerate().filter(|_| first_shot) {
+            let mut shifts = StepRng::new(seed, SHIFT_STREAM - (scene.lights.len() + e) as u64);
+            let triangles: Vec<_> = emitter
+                .triangles
+                .iter()
+                .map(|t| (t.vertices, t.normal, t.area, [shifts.uniform(), shifts.uniform()]))
+                .collect();
+            let centre = triangles[0].0.iter().sum::<DVec3>() / 3.0;
+            sources.push((Source::Area { radiance: emitter.radiance, shared: true, triangles }, centre));
         }
         let near = buffers.radius * 1e-6;
         let max_side = ctx.limits().max_texture_dimension_2d;
@@ -152,7 +174,11 @@ impl DirectLights {
                 .enumerate()
                 .flat_map(|(i, (source, position))| {
                     let atlas = if matches!(source, Source::Point { .. }) { KEPT } else { PER_PASS };
-                    first_shot::faces(&window_sample(source, *position), window, r, near)
+                    let normal = match source {
+                        Source::Area { triangles, .. } => triangles[0].1,
+                        Source::Point { .. } => DVec3::ZERO,
+                    };
+                    first_shot::faces(&window_sample(source, *position, normal), window, r, near)
                         .0
                         .into_iter()
                         .map(move |f| (i, f, atlas))
@@ -282,17 +308,18 @@ impl DirectLights {
         }
         self.prepared = Some(pass);
         for (planned, entry) in self.lights.iter().zip(self.table.iter_mut()) {
-            let Source::Area { radiance, normal, triangles } = &planned.source else { continue };
+            let Source::Area { radiance, shared, triangles } = &planned.source else { continue };
             let count = triangles.len() as u64;
-            let (vertices, area, shift) = triangles[(pass % count.max(1)) as usize];
+            let (vertices, normal, area, shift) = triangles[(pass % count.max(1)) as usize];
             let [u1, u2] = r2_point(pass / count.max(1), shift);
             let y = point_in_triangle(vertices, u1, u2);
             let weight = (area * count as f64) as f32;
             entry.position = [y.x as f32, y.y as f32, y.z as f32, 0.0];
-            entry.normal = [normal.x as f32, normal.y as f32, normal.z as f32, 0.0];
+            let pick_area = if *shared { weight } else { 0.0 };
+            entry.normal = [normal.x as f32, normal.y as f32, normal.z as f32, pick_area];
             entry.strength = [radiance[0] * weight, radiance[1] * weight, radiance[2] * weight, 0.0];
             let r = self.resolution;
-            let (faces, _) = first_shot::faces(&window_sample(&planned.source, y), self.window, r, self.near);
+            let (faces, _) = first_shot::faces(&window_sample(&planned.source, y, normal), self.window, r, self.near);
             for (slot, face) in self.faces[planned.faces.clone()].iter_mut().zip(faces) {
                 slot.view = face.view.gpu([0.5, 0.5]);
             }

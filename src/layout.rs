@@ -53,7 +53,11 @@ pub struct GpuPatch {
     pub material: u32,
     /// `PATCH_*` bits.
     pub flags: u32,
-    pub _pad: [u32; 2],
+    /// For a patch of a first-shot emitting shape: the area that a direct-light pass's point
+    /// on its triangle side stands for (T A_t, `direct_light.rs`), which gives the density
+    /// of those points for multiple importance sampling (docs/ALGORITHM.md 6); else 0.
+    pub light_pick_area: f32,
+    pub _pad: u32,
 }
 
 /// A material in the unified max-Phong form (diffuse = Phong with ks = 0). WGSL: `Material`.
@@ -133,7 +137,10 @@ pub struct GpuEstimateParams {
     pub patch_count: u32,
     /// Entries of the direct-light table.
     pub light_count: u32,
-    pub _pad: [u32; 2],
+    /// 1 when the image gathers (G) as well: the direct light of emitting shapes is then
+    /// shared between D and G by multiple importance sampling; 0 for a direct-light image.
+    pub mis: u32,
+    pub _pad: u32,
 }
 
 /// A light as the per-pixel direct light sees it in one pass (docs/ALGORITHM.md 6). WGSL:

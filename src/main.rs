@@ -79,7 +79,8 @@ struct RenderArgs {
     /// comes first).
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     time: Option<f64>,
-    /// Solve the area lights as emitters inside the iteration instead of first shot.
+    /// Solve the area lights and emitting shapes as emitters inside the iteration instead of
+    /// first shot.
     #[arg(long)]
     no_first_shot: bool,
     /// Pixels along an edge of each parallel projection of the iteration.
@@ -511,6 +512,9 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         patches.patches.len(),
         patches.samples.len()
     ));
+    for note in &patches.notes {
+        say.say(format!("note: {note}"));
+    }
     let resume = read_resume(&args, &plan, &scene, &options)?;
     let ctx = Context::new(&args.adapter)?;
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;

@@ -393,7 +393,8 @@ impl<'a> Renderer<'a> {
             Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
         };
         let estimate = ImageEstimate::new(device, &buffers, &camera, &direct, iteration.as_ref().map(|i| &i.gather));
-        estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count());
+        let gathers = iteration.is_some();
+        estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), gathers);
         let burn_in = burn_in_steps(scene, options);
         Ok(Renderer {
             ctx,
@@ -643,6 +644,8 @@ impl<'a> Renderer<'a> {
             let pick = ((shuffle.uniform() * (i + 1) as f64) as usize).min(i);
             order.swap(i, pick);
         }
+        // No gather adds its share of the emitting shapes' light: D takes all of it.
+        self.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, self.direct.count(), false);
         let mut done = DirectImage::default();
         for k in 0..passes {
             // Generators of their own, apart from the steps' (seed, k) streams.

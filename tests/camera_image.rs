@@ -80,7 +80,7 @@ fn emitting_triangle_covers_exactly_its_projection() {
     assert!(tri.normal.dot(cam.position - v[0]) > 0.0, "test triangle must face the camera");
     let env = [0.25, 0.5, 0.125];
     let sc = scene(cam, env);
-    let patches = Patches { patches: vec![tri], samples: vec![] };
+    let patches = Patches { patches: vec![tri], ..Default::default() };
     let mut options = RenderOptions::from_scene(&sc);
     options.iterations = 0;
     let image = render(&ctx, &sc, &patches, &options).unwrap().image;
@@ -130,7 +130,7 @@ fn back_faces_are_black_and_twins_show_the_front_one() {
     let env = [0.5; 3];
     let centre_of = |pos: DVec3, ps: Vec<Patch>| {
         let sc = scene(camera(pos, 16, 16), env);
-        let patches = Patches { patches: ps, samples: vec![] };
+        let patches = Patches { patches: ps, ..Default::default() };
         let mut options = RenderOptions::from_scene(&sc);
         options.iterations = 0;
         render(&ctx, &sc, &patches, &options).unwrap().image.at(8, 8)

@@ -104,7 +104,7 @@ fn test04_hand_made_patches() {
                 }
             })
             .collect(),
-        samples: vec![],
+        ..Default::default()
     };
     let options = RenderOptions { width: 2, height: 2, iterations: 0, ..cornell_box().1 };
     let patch_table = 2 * size_of::<GpuPatch>() as u64;

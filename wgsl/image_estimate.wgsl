@@ -180,6 +180,30 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     return d == a || d == b || d == c || !blocks(d, j, y, x);
 }
 
+// Multiple importance sampling of an emitting shape's light (docs/ALGORITHM.md 6): the
+// share D takes of light arriving from a point of the shape at distance^2 r2 and cos_L, by
+// the balance heuristic between the densities, per unit solid angle at x, of D's points
+// (r^2 / (cos_L T A_t)) and of the gather's directions (1 / (2 pi)). G takes the rest.
+fn light_share(r2: f32, cos_l: f32, pick_area: f32) -> f32 {
+    let p_light = r2 / max(cos_l * pick_area, 1e-30);
+    let p_gather = 1.0 / (2.0 * PI);
+    return p_light / (p_light + p_gather);
+}
+
+// G's share of the emission of patch m, seen from x along `toward` (m's front faces x): none
+// unless m belongs to a first-shot emitting shape (whose emission the iteration leaves out)
+// and the image gathers.
+fn emitted_share(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
+    let pick_area = patches[m].light_pick_area;
+    let plane = patches[m].normal;
+    let cos_l = -dot(plane.xyz, toward);
+    if (params.mis == 0u || pick_area <= 0.0 || cos_l <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let t = abs((plane.w - dot(plane.xyz, x)) / cos_l);
+    return patches[m].emission.rgb * (1.0 - light_share(t * t, cos_l, pick_area));
+}
+
 // D(x, w_out): every light's direct radiance reflected at x on patch j toward w_out.
 fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
@@ -194,7 +218,11 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
         }
         var g = cos_x / r2;
         if (lights[i].kind == LIGHT_AREA) {
-            g *= max(0.0, dot(lights[i].normal.xyz, -w_in));
+            let cos_l = max(0.0, dot(lights[i].normal.xyz, -w_in));
+            g *= cos_l;
+            if (params.mis != 0u && lights[i].normal.w > 0.0) {
+                g *= light_share(r2, cos_l, lights[i].normal.w);
+            }
         }
         if (g > 0.0 && visible(y, lights[i].first_face, lights[i].faces, j, x)) {
             sum += lights[i].strength.rgb * g * brdf(m, n, w_in, w_out);
@@ -291,7 +319,8 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
         }
         let other = fragments[select(k - 1u, k + 1u, front)].y;
         if (((other & FRAGMENT_FRONT_BIT) != 0u) != front) {
-            return image_outgoing[other & ~FRAGMENT_FRONT_BIT].rgb;
+            let m = other & ~FRAGMENT_FRONT_BIT;
+            return image_outgoing[m].rgb + emitted_share(m, x, toward);
         }
         return vec3<f32>(0.0);
     }
@@ -318,7 +347,7 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
     let m = best.patch_id - 1u;
     // Its front must face x: against the direction of travel.
     if (dot(patches[m].normal.xyz, toward) < 0.0) {
-        return image_outgoing[m].rgb;
+        return image_outgoing[m].rgb + emitted_share(m, x, toward);
     }
     return vec3<f32>(0.0);
 }

@@ -53,8 +53,9 @@ fn v4(v: DVec3, w: f64) -> [f32; 4] {
     [v.x as f32, v.y as f32, v.z as f32, w as f32]
 }
 
-/// The patch table. `first_shot`: whether area lights are first-shot lights (their emission
-/// is then left out of the iteration) or plain emitters.
+/// The patch table. `first_shot`: whether area lights and the first-shot triangles of
+/// emitting shapes are first-shot lights (their emission is then left out of the iteration)
+/// or plain emitters.
 pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<GpuPatch> {
     let black = scene.materials.len() as u32;
     patches
@@ -65,7 +66,7 @@ pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<Gp
             if p.twin {
                 flags |= PATCH_TWIN;
             }
-            if first_shot && matches!(p.kind, PatchKind::AreaLight { .. }) {
+            if first_shot && matches!(p.kind, PatchKind::AreaLight { .. } | PatchKind::Emitter { .. }) {
                 flags |= PATCH_FIRST_SHOT_LIGHT;
             }
             GpuPatch {
@@ -76,10 +77,24 @@ pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<Gp
                 emission: [p.emission[0], p.emission[1], p.emission[2], 0.0],
                 material: p.material.unwrap_or(black),
                 flags,
-                _pad: [0; 2],
+                light_pick_area: light_pick_area(patches, p, first_shot) as f32,
+                _pad: 0,
             }
         })
         .collect()
+}
+
+/// T A_t for a patch of a first-shot emitting shape: the area that a direct-light pass's
+/// point on its triangle side t stands for, T being the number of the shape's sides
+/// (`direct_light.rs`); 0 for every other patch, and without first shot.
+pub fn light_pick_area(patches: &Patches, p: &crate::scene::Patch, first_shot: bool) -> f64 {
+    match p.kind {
+        PatchKind::Emitter { emitter, side, .. } if first_shot => {
+            let triangles = &patches.emitters[emitter as usize].triangles;
+            triangles.len() as f64 * triangles[side as usize].area
+        }
+        _ => 0.0,
+    }
 }
 
 /// Three vertices per patch with the patch id (and twin bit) for the rasterising stages.

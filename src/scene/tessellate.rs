@@ -7,11 +7,26 @@
 //! without a gap. An area light is meshed on its own n x n grid, whatever the
 //! patch size: its vertices are the first shot's samples, and the trapezoid weights need
 //! exactly that grid.
+//!
+//! A shape with `emission` is a first-shot light too (docs/ALGORITHM.md 1, "Emitting
+//! shapes"): every emitting side of its triangles gets a triangular grid of light samples
+//! of its own (`emitter_grid` says how fine), up to `MAX_EMITTER_SAMPLES` for the scene.
 
 use super::contact::{Pieces, contact_pieces};
 use super::{Light, Rgb, Scene, Triangle};
 use crate::{Error, Result};
 use glam::DVec3;
+use std::collections::HashMap;
+
+/// The first-shot samples that emitting shapes share out by power: a triangle side that
+/// emits a share s of all the shapes' emitted power gets a grid of at most about s times
+/// this many samples (and never fewer than one).
+pub const EMITTER_SAMPLE_SHARE: f64 = 64.0;
+
+/// The most first-shot samples on emitting shapes. The
+/// strongest triangle sides come first; those past the cap emit inside the iteration, as
+/// with `--no-first-shot`, and `Patches::notes` says how many and how much power.
+pub const MAX_EMITTER_SAMPLES: u64 = 4096;
 
 /// The most patches a tessellation may produce (33 million). Each costs about 150 bytes on
 /// the host and 200 on the GPU, so beyond it a scene outgrows the memory of the machines
@@ -26,6 +41,12 @@ pub enum PatchKind {
     /// A triangle of an area light's n x n grid: it emits `radiance` on its front, reflects
     /// nothing (black material) and occludes like any surface.
     AreaLight { light: u32 },
+    /// A triangle of an emitting `[[shapes]]` entry whose emission is a first-shot light:
+    /// `Patches::emitters[emitter]`. It reflects with its material like any surface patch;
+    /// with first shot its emission is left out of the iteration (its first reflection
+    /// replaces it) and the camera sees it directly. `side`: its triangle side in
+    /// `Emitter::triangles`.
+    Emitter { surface: u32, emitter: u32, side: u32 },
 }
 
 /// One triangular patch: the unit of the finite-element radiance representation.
@@ -57,7 +78,8 @@ pub struct LightSample {
     /// w_i: for an area-light vertex, (area of the light triangles sharing it) / 3; 1 for a
     /// point light.
     pub weight: f64,
-    /// Index into `Scene::lights`.
+    /// The source: an index into `Scene::lights`, or for a sample on an emitting shape,
+    /// `Scene::lights.len()` + its index in `Patches::emitters`.
     pub light: u32,
 }
 
@@ -66,8 +88,9 @@ pub struct LightSample {
 pub enum SampleKind {
     /// A point light: a full cube window, S_i = power.
     Point,
-    /// A vertex of an area light's mesh, with the light's unit normal: a window above the
-    /// light, S_i = radiance, the trapezoid weight in `LightSample::weight`.
+    /// A vertex of an area light's mesh (with the trapezoid weight) or the centre of a cell of
+    /// an emitting triangle's grid (with the cell's area), and that surface's unit normal: a
+    /// window above it, S_i = radiance, the weight in `LightSample::weight`.
     AreaVertex { normal: DVec3 },
 }
 
@@ -76,11 +99,38 @@ pub enum SampleKind {
 /// Order: the surfaces' patches in the order of `Scene::surfaces` and their triangles (a
 /// twin right after its patch), then the area lights' patches in the order of
 /// `Scene::lights`; the samples in the order of `Scene::lights`, an area light's row by row
-/// from v0 (index j (n + 1) + i for the vertex i steps from v0 towards v1 and j towards v3).
+/// from v0 (index j (n + 1) + i for the vertex i steps from v0 towards v1 and j towards v3),
+/// then the emitters' samples in the order of `emitters`.
 #[derive(Debug, Clone, Default)]
 pub struct Patches {
     pub patches: Vec<Patch>,
     pub samples: Vec<LightSample>,
+    /// The emitting shapes whose emission is first shot, one per shape (`PatchKind::Emitter`).
+    pub emitters: Vec<Emitter>,
+    /// One line each about what tessellation could not do as asked (emitters past the cap).
+    pub notes: Vec<String>,
+}
+
+/// An emitting shape as a first-shot light: the sides of its triangles that emit, each a
+/// planar one-sided Lambertian emitter of the shape's radiance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Emitter {
+    /// Index into `Scene::surfaces`.
+    pub surface: u32,
+    pub radiance: Rgb,
+    pub triangles: Vec<EmitterTriangle>,
+}
+
+/// One emitting side of a source triangle (a two-sided shape's back is the triangle with its
+/// winding reversed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EmitterTriangle {
+    /// Counter-clockwise seen from the emitting side.
+    pub vertices: [DVec3; 3],
+    pub normal: DVec3,
+    pub area: f64,
+    /// k: the side's sample grid cuts each edge into k (k^2 cells, a sample at each centre).
+    pub grid: u32,
 }
 
 /// A summary for progress output and `--stats`.
@@ -172,9 +222,19 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
         })
         .sum();
 
-    let mut out = Patches { patches: Vec::with_capacity(count as usize), samples: Vec::with_capacity(sample_count) };
+    let plan = plan_emitters(scene, patch_size)?;
+    let mut out = Patches {
+        patches: Vec::with_capacity(count as usize),
+        samples: Vec::with_capacity(sample_count),
+        emitters: Vec::with_capacity(plan.emitters.len()),
+        notes: plan.notes,
+    };
     for (s, surface) in scene.surfaces.iter().enumerate() {
         for (t, triangle) in surface.triangles.iter().enumerate() {
+            let kind = |back: bool| match plan.first_shot.get(&(s as u32, t as u32, back)) {
+                Some(&(emitter, side)) => PatchKind::Emitter { surface: s as u32, emitter, side },
+                None => PatchKind::Surface { surface: s as u32 },
+            };
             for source in SourceTriangle::pieces(scene, s, t, triangle, &pieces)? {
                 let base = Patch {
                     vertices: source.vertices,
@@ -182,10 +242,10 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
                     area: 0.0,
                     material: Some(triangle.material),
                     emission: surface.emission,
-                    kind: PatchKind::Surface { surface: s as u32 },
+                    kind: kind(false),
                     twin: surface.two_sided,
                 };
-                source.split_into(&base, patch_size, &mut out.patches);
+                source.split_into(&base, kind(true), patch_size, &mut out.patches);
             }
         }
     }
@@ -203,7 +263,156 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
             }
         }
     }
+    for (e, emitter) in plan.emitters.into_iter().enumerate() {
+        emitter_samples(&emitter, (scene.lights.len() + e) as u32, &mut out.samples);
+        out.emitters.push(emitter);
+    }
     Ok(out)
+}
+
+/// Which emitting triangle sides are first-shot lights, and their grids.
+struct EmitterPlan {
+    emitters: Vec<Emitter>,
+    /// (surface, triangle, back side) -> (index into `emitters`, into its `triangles`).
+    first_shot: HashMap<(u32, u32, bool), (u32, u32)>,
+    notes: Vec<String>,
+}
+
+/// The largest k >= 1 whose grid, k^2 cells and as many samples, has at most `n`.
+fn grid_for_samples(n: f64) -> u64 {
+    let k = n.max(0.0).sqrt().floor();
+    if k.is_finite() { (k as u64).max(1) } else { 1 }
+}
+
+fn grid_samples(k: u64) -> u64 {
+    k * k
+}
+
+/// Every emitting side of every shape's triangles, strongest first (power pi A mean(Le)),
+/// gets a grid of k x k congruent cells (`split_into`'s lattice), one sample at the centre
+/// of each, with
+///
+///     k = min(k_area, k_power)
+///
+/// k_area: the least k that cuts its longest edge to at most the patch size (the grid is as
+///         fine as the surfaces' patches, no finer);
+/// k_power: the largest k >= 1 with k^2 <= `EMITTER_SAMPLE_SHARE` x (its share of the
+///         emitting shapes' power), so weak emitters get coarse grids.
+///
+/// Sides are taken in that order until the next one would pass `MAX_EMITTER_SAMPLES`; the
+/// rest stay emitters of the iteration, reported in one note.
+fn plan_emitters(scene: &Scene, patch_size: f64) -> Result<EmitterPlan> {
+    struct Side {
+        surface: u32,
+        triangle: u32,
+        back: bool,
+        vertices: [DVec3; 3],
+        normal: DVec3,
+        area: f64,
+        power: f64,
+        k_area: u64,
+    }
+    let mut sides = Vec::new();
+    for (s, surface) in scene.surfaces.iter().enumerate() {
+        let mean = surface.emission.iter().map(|&c| c as f64).sum::<f64>() / 3.0;
+        if !(mean > 0.0) {
+            continue;
+        }
+        for (t, triangle) in surface.triangles.iter().enumerate() {
+            let source = SourceTriangle::new(scene, s, t, triangle)?;
+            let power = std::f64::consts::PI * source.area * mean;
+            let k_area = source.splits(patch_size);
+            let [a, b, c] = triangle.vertices;
+            for back in [false, true].into_iter().take(if surface.two_sided { 2 } else { 1 }) {
+                let (vertices, normal) = if back { ([a, c, b], -source.normal) } else { ([a, b, c], source.normal) };
+                sides.push(Side {
+                    surface: s as u32,
+                    triangle: t as u32,
+                    back,
+                    vertices,
+                    normal,
+                    area: source.area,
+                    power,
+                    k_area,
+                });
+            }
+        }
+    }
+    let total_power: f64 = sides.iter().map(|side| side.power).sum();
+    let mut order: Vec<usize> = (0..sides.len()).collect();
+    order.sort_by(|&a, &b| sides[b].power.total_cmp(&sides[a].power));
+    let (mut used, mut grids) = (0u64, vec![None; sides.len()]);
+    for &i in &order {
+        let side = &sides[i];
+        let k_power = grid_for_samples(EMITTER_SAMPLE_SHARE * side.power / total_power);
+        let k = side.k_area.min(k_power);
+        if used + grid_samples(k) > MAX_EMITTER_SAMPLES {
+            break;
+        }
+        used += grid_samples(k);
+        grids[i] = Some(k as u32);
+    }
+    let mut plan = EmitterPlan { emitters: Vec::new(), first_shot: HashMap::new(), notes: Vec::new() };
+    for (side, grid) in sides.iter().zip(&grids) {
+        let Some(grid) = *grid else { continue };
+        if plan.emitters.last().is_none_or(|e: &Emitter| e.surface != side.surface) {
+            let radiance = scene.surfaces[side.surface as usize].emission;
+            plan.emitters.push(Emitter { surface: side.surface, radiance, triangles: Vec::new() });
+        }
+        let e = plan.emitters.len() - 1;
+        plan.emitters[e].triangles.push(EmitterTriangle {
+            vertices: side.vertices,
+            normal: side.normal,
+            area: side.area,
+            grid,
+        });
+        let index = (e as u32, plan.emitters[e].triangles.len() as u32 - 1);
+        plan.first_shot.insert((side.surface, side.triangle, side.back), index);
+    }
+    let left = grids.iter().filter(|g| g.is_none()).count();
+    if left > 0 {
+        let power: f64 = sides.iter().zip(&grids).filter(|(_, g)| g.is_none()).map(|(s, _)| s.power).sum();
+        plan.notes.push(format!(
+            "{left} of {} emitting triangle sides ({:.1} % of the emitting shapes' power) are past the \
+             first shot's cap of {MAX_EMITTER_SAMPLES} samples on emitting shapes: they emit inside \
+             the iteration instead",
+            sides.len(),
+            100.0 * power / total_power
+        ));
+    }
+    Ok(plan)
+}
+
+/// The samples of an emitter: the centre of every cell of every side's k x k grid, weighted
+/// by the cell's area (the midpoint rule). Not the cells' corners, as on an area light: a
+/// corner on the edge of an emitting shape can lie on another surface (an emitting floor
+/// meets the walls), and the part of its window behind that surface, which the surface
+/// would receive from points just inside the edge, would see nothing at all.
+fn emitter_samples(emitter: &Emitter, light: u32, samples: &mut Vec<LightSample>) {
+    for side in &emitter.triangles {
+        let k = side.grid as u64;
+        let [v0, v1, v2] = side.vertices;
+        let kf = k as f64;
+        let at = |i: u64, j: u64| v0 + (v1 - v0) * (i as f64 / kf) + (v2 - v0) * (j as f64 / kf);
+        let cell = side.area / (kf * kf);
+        let mut add = |[a, b, c]: [DVec3; 3]| {
+            samples.push(LightSample {
+                position: (a + b + c) / 3.0,
+                kind: SampleKind::AreaVertex { normal: side.normal },
+                strength: emitter.radiance,
+                weight: cell,
+                light,
+            });
+        };
+        for j in 0..k {
+            for i in 0..k - j {
+                add([at(i, j), at(i + 1, j), at(i, j + 1)]);
+                if i + j + 2 <= k {
+                    add([at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)]);
+                }
+            }
+        }
+    }
 }
 
 /// The bounding sphere of every patch vertex and light sample: the centre of their
@@ -282,7 +491,7 @@ impl SourceTriangle {
     /// Appends the k^2 patches (and twins): on the lattice v0 + (i e1 + j e2) / k, the
     /// "upright" triangles are translates of the source scaled by 1/k and the "inverted"
     /// ones are those rotated by 180 degrees in its plane, so all keep its winding.
-    fn split_into(&self, base: &Patch, patch_size: f64, out: &mut Vec<Patch>) {
+    fn split_into(&self, base: &Patch, twin_kind: PatchKind, patch_size: f64, out: &mut Vec<Patch>) {
         let k = self.splits(patch_size);
         let [v0, v1, v2] = self.vertices;
         let kf = k as f64;
@@ -294,7 +503,7 @@ impl SourceTriangle {
             out.push(patch);
             if base.twin {
                 let [a, b, c] = vertices;
-                out.push(Patch { vertices: [a, c, b], normal: -self.normal, ..patch });
+                out.push(Patch { vertices: [a, c, b], normal: -self.normal, kind: twin_kind, ..patch });
             }
         };
         if k == 1 {
@@ -510,7 +719,8 @@ pub(crate) mod tests {
                 assert!(winding.dot(p.normal) > 1.0 - 1e-9);
                 assert_eq!(p.material, Some(0));
                 assert_eq!(p.emission, [0.25, 0.5, 1.0]);
-                assert_eq!(p.kind, PatchKind::Surface { surface: 0 });
+                // It emits, so its emission is a first-shot light.
+                assert!(matches!(p.kind, PatchKind::Emitter { surface: 0, emitter: 0, .. }));
                 assert!(!p.twin);
             }
             next += k * k;
@@ -737,7 +947,8 @@ pub(crate) mod tests {
                 other => panic!("shape type {other} is not read by this test"),
             };
             let two_sided = shape.get("two_sided").is_some_and(|v| v.as_bool().unwrap());
-            surfaces.push(surface(&triangles, two_sided));
+            let emission = shape.get("emission").map_or([0.0; 3], colour);
+            surfaces.push(Surface { emission, ..surface(&triangles, two_sided) });
         }
         let mut lights = Vec::new();
         for light in table.get("lights").and_then(|l| l.as_array()).into_iter().flatten() {
@@ -781,10 +992,120 @@ pub(crate) mod tests {
         }
     }
 
+    fn emitting(triangles: &[[DVec3; 3]], emission: Rgb, two_sided: bool) -> Surface {
+        Surface { emission, ..surface(triangles, two_sided) }
+    }
+
+    fn quad_triangles([v0, v1, v2, v3]: [DVec3; 4]) -> Vec<[DVec3; 3]> {
+        vec![[v0, v1, v2], [v0, v2, v3]]
+    }
+
+    #[test]
+    fn emitting_quad_samples_are_its_cells_centres() {
+        // The quad of an area light as an emitting shape whose grid the patch size makes
+        // n x n per triangle: n^2 samples per triangle, each at a cell's centre, strictly
+        // inside the quad, weighted by the cell's area.
+        let Light::Area { vertices, .. } = square_light(0.8, 1) else { unreachable!() };
+        let diagonal = vertices[0].distance(vertices[2]);
+        for n in [1u32, 2, 3] {
+            let shape = scene_of(vec![emitting(&quad_triangles(vertices), [2.0; 3], false)], vec![]);
+            let patches = tessellate(&shape, diagonal / n as f64).unwrap();
+            assert_eq!(patches.emitters.len(), 1);
+            assert!(patches.emitters[0].triangles.iter().all(|t| t.grid == n));
+            assert_eq!(patches.samples.len(), 2 * (n * n) as usize);
+            let cell = 0.8 * 0.8 / (2 * n * n) as f64;
+            let h = 0.8 / n as f64;
+            for s in &patches.samples {
+                assert_eq!(s.kind, SampleKind::AreaVertex { normal: DVec3::NEG_Y });
+                assert!((s.weight - cell).abs() <= ROUNDING);
+                assert_eq!((s.strength, s.light), ([2.0; 3], 0), "lights.len() + emitter 0");
+                // A cell's centre lies a third of the cell's side from its legs (and nearer
+                // no edge of the quad): in the lattice's coordinates, fractions of 1/3 or 2/3.
+                let (x, z) = (s.position.x / h, s.position.z / h);
+                for f in [x.fract(), z.fract()] {
+                    assert!((f - 1.0 / 3.0).abs() < 1e-9 || (f - 2.0 / 3.0).abs() < 1e-9, "{}", s.position);
+                }
+                assert!(s.position.x > 0.0 && s.position.x < 0.8 && s.position.z > 0.0 && s.position.z < 0.8);
+            }
+            for p in &patches.patches {
+                assert!(matches!(p.kind, PatchKind::Emitter { surface: 0, emitter: 0, .. }));
+                assert_eq!(p.material, Some(0), "an emitting shape keeps its material");
+            }
+        }
+    }
+
+    #[test]
+    fn emitter_grids_follow_area_and_power() {
+        // Two emitting shapes, one 9 times as strong: their sample weights add up to their
+        // areas, and k = min(k_area, k_power) on each.
+        let tri = |x: f64| [DVec3::new(x, 0.0, 0.0), DVec3::new(x + 1.0, 0.0, 0.0), DVec3::new(x, 1.0, 0.0)];
+        let strong = emitting(&[tri(0.0)], [9.0; 3], false);
+        let weak = emitting(&[tri(5.0)], [1.0; 3], true);
+        let scene = scene_of(vec![strong, weak], vec![]);
+        for patch_size in [f64::INFINITY, 0.2, 0.05] {
+            let patches = tessellate(&scene, patch_size).unwrap();
+            assert_eq!(patches.emitters.len(), 2);
+            let k_area = |p: f64| if p.is_infinite() { 1 } else { (2f64.sqrt() / p).ceil() as u32 };
+            // Power shares: strong 9 / 11 of one side, weak 1 / 11 on each of its two sides.
+            let k_power = |share: f64| grid_for_samples(EMITTER_SAMPLE_SHARE * share) as u32;
+            assert_eq!(patches.emitters[0].triangles[0].grid, k_area(patch_size).min(k_power(9.0 / 11.0)));
+            assert_eq!(patches.emitters[1].triangles.len(), 2, "both sides of a two-sided emitter");
+            for t in &patches.emitters[1].triangles {
+                assert_eq!(t.grid, k_area(patch_size).min(k_power(1.0 / 11.0)));
+            }
+            let normals: Vec<_> = patches.emitters[1].triangles.iter().map(|t| t.normal).collect();
+            assert_eq!(normals, [DVec3::Z, DVec3::NEG_Z]);
+            for (e, emitter) in patches.emitters.iter().enumerate() {
+                let weights: f64 = patches.samples.iter().filter(|s| s.light == e as u32).map(|s| s.weight).sum();
+                let area: f64 = emitter.triangles.iter().map(|t| t.area).sum();
+                assert!((weights - area).abs() <= ROUNDING, "{weights} vs {area}");
+            }
+            for p in &patches.patches {
+                let expected = if p.vertices[0].x < 2.0 { 0 } else { 1 };
+                assert!(
+                    matches!(p.kind, PatchKind::Emitter { surface, emitter, .. } if surface == expected && emitter == expected)
+                );
+            }
+        }
+        // k_power's own values: the largest k with k^2 <= n, at least 1.
+        let ks: Vec<u64> = [0.0, 3.9, 4.0, 8.9, 9.0, 10.0, 32.0, 64.0].map(grid_for_samples).to_vec();
+        assert_eq!(ks, [1, 1, 2, 2, 3, 3, 5, 8]);
+    }
+
+    #[test]
+    fn emitters_past_the_cap_stay_in_the_iteration_with_a_note() {
+        // More emitting triangles than the cap has samples for (one each at k = 1): the
+        // brightest are first shot, the rest are plain surface patches, and a note says so.
+        let count = MAX_EMITTER_SAMPLES as usize + 10;
+        let tri = |i: usize| {
+            let x = i as f64 * 2.0;
+            [DVec3::new(x, 0.0, 0.0), DVec3::new(x + 1.0, 0.0, 0.0), DVec3::new(x, 1.0, 0.0)]
+        };
+        let dim = emitting(&(0..10).map(tri).collect::<Vec<_>>(), [0.5; 3], false);
+        let bright = emitting(&(10..count).map(tri).collect::<Vec<_>>(), [1.0; 3], false);
+        let patches = tessellate(&scene_of(vec![dim, bright], vec![]), f64::INFINITY).unwrap();
+        assert_eq!(patches.samples.len() as u64, MAX_EMITTER_SAMPLES);
+        assert_eq!(patches.emitters.len(), 1, "only the bright shape is first shot");
+        assert_eq!(patches.emitters[0].surface, 1);
+        assert!(patches.patches[..10].iter().all(|p| p.kind == PatchKind::Surface { surface: 0 }));
+        assert!(patches.patches[10..].iter().all(|p| matches!(p.kind, PatchKind::Emitter { surface: 1, .. })));
+        assert_eq!(patches.notes.len(), 1);
+        assert!(patches.notes[0].starts_with("10 of "), "{}", patches.notes[0]);
+    }
+
+    #[test]
+    fn shapes_without_emission_are_no_emitters() {
+        let mut dark = surface(&random_triangles(3, 4), false);
+        dark.emission = [0.0; 3];
+        let patches = tessellate(&scene_of(vec![dark], vec![]), 1.0).unwrap();
+        assert!(patches.emitters.is_empty() && patches.samples.is_empty() && patches.notes.is_empty());
+    }
+
     #[test]
     fn stats_count_and_add_up() {
         let triangles = random_triangles(5, 4);
-        let scene = scene_of(vec![surface(&triangles, true)], vec![square_light(0.5, 3)]);
+        let dark = Surface { emission: [0.0; 3], ..surface(&triangles, true) };
+        let scene = scene_of(vec![dark], vec![square_light(0.5, 3)]);
         let patches = tessellate(&scene, 2.0).unwrap();
         let stats = patches.stats();
         assert_eq!(stats.light_patches, 18);

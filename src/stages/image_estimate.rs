@@ -182,13 +182,23 @@ impl ImageEstimate {
         kernel::dispatch(encoder, "firstshot.image_estimate.pass", pipeline, &bind_groups, groups);
     }
 
-    /// What the estimate adds where no surface is, and how many direct lights it evaluates.
-    pub fn set_params(&self, queue: &wgpu::Queue, environment: [f32; 3], patch_count: u32, light_count: u32) {
+    /// What the estimate adds where no surface is, how many direct lights it evaluates, and
+    /// whether the image gathers too (`mis`: the emitting shapes' direct light is then shared
+    /// between D and G, docs/ALGORITHM.md 6; a direct-light image must not share it).
+    pub fn set_params(
+        &self,
+        queue: &wgpu::Queue,
+        environment: [f32; 3],
+        patch_count: u32,
+        light_count: u32,
+        mis: bool,
+    ) {
         let params = GpuEstimateParams {
             environment: [environment[0], environment[1], environment[2], 0.0],
             patch_count,
             light_count,
-            _pad: [0; 2],
+            mis: mis as u32,
+            _pad: 0,
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
     }

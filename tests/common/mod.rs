@@ -130,7 +130,7 @@ pub fn point_sample(position: DVec3) -> LightSample {
 }
 
 pub fn patches_of(triangles: &[[DVec3; 3]], samples: Vec<LightSample>) -> Patches {
-    Patches { patches: triangles.iter().map(|&t| patch(t)).collect(), samples }
+    Patches { patches: triangles.iter().map(|&t| patch(t)).collect(), samples, ..Default::default() }
 }
 
 /// Solid angle of a triangle seen from `p` (Van Oosterom and Strackee, 1983).

@@ -10,7 +10,7 @@ struct Patch {
     emission: vec4<f32>, // rgb emitted radiance on the front
     material: u32,
     flags: u32,          // PATCH_* bits
-    _pad0: u32,
+    light_pick_area: f32, // first-shot emitting shape: T A_t of its side (MIS), else 0
     _pad1: u32,
 }
 
@@ -59,14 +59,14 @@ struct EstimateParams {
     environment: vec4<f32>,
     patch_count: u32,
     light_count: u32,
-    _pad0: u32,
+    mis: u32,            // 1: emitting shapes' direct light shared between D and G
     _pad1: u32,
 }
 
 // A light for the per-pixel direct light of one pass (Rust: GpuDirectLight).
 struct DirectLight {
     position: vec4<f32>, // xyz point light, or this pass's point on the area light
-    normal: vec4<f32>,   // xyz n_L (zero for a point light)
+    normal: vec4<f32>,   // xyz n_L (zero for a point light); w T A_t of an emitting shape (MIS), else 0
     strength: vec4<f32>, // rgb factor of V f cos / r^2 (cos_L too for an area light)
     kind: u32,           // LIGHT_*
     first_face: u32,     // its window's faces in the face table
