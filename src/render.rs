@@ -11,7 +11,7 @@ use crate::image::Image;
 use crate::iteration::{BundleScene, Iteration, fragment_bound};
 use crate::layout::*;
 use crate::rng::StepRng;
-use crate::scene::{Patches, Scene};
+use crate::scene::{Camera, NamedCamera, Patches, Scene};
 use crate::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
 use crate::stages::image_estimate::ImageEstimate;
 use crate::{Error, Result};
@@ -70,6 +70,9 @@ pub struct RenderOptions {
     /// the area lights and their window item buffers, the costliest image stages); the
     /// indirect light G is estimated every step.
     pub window_steps: u32,
+    /// The cameras whose images one run makes from the same iteration (`--all-cameras`), each
+    /// at its own `width` x `height`; empty: `scene.camera` at `width` x `height` above.
+    pub cameras: Vec<NamedCamera>,
 }
 
 impl RenderOptions {
@@ -90,7 +93,18 @@ impl RenderOptions {
             direct_passes: DEFAULT_DIRECT_PASSES,
             burn_in: None,
             window_steps: DEFAULT_WINDOW_STEPS,
+            cameras: Vec::new(),
         }
+    }
+
+    /// The views of the render, in order: `cameras`, or the scene's camera at `width` x
+    /// `height` (named "camera").
+    pub fn views(&self, scene: &Scene) -> Vec<NamedCamera> {
+        if !self.cameras.is_empty() {
+            return self.cameras.clone();
+        }
+        let camera = Camera { width: self.width, height: self.height, ..scene.camera };
+        vec![NamedCamera { name: "camera".into(), camera }]
     }
 }
 
@@ -161,13 +175,24 @@ pub struct RenderStats {
 
 /// The rendered image and how it was made.
 pub struct Rendered {
+    /// The image of the first view (`RenderOptions::views`).
     pub image: Image,
     /// The raw image sum the image is the mean of (rgb sum, w the number of estimates per
     /// pixel), row by row: what a shard's part file keeps (`merge`).
     pub image_sum: Vec<[f32; 4]>,
+    /// The images of the views after the first, in order (`--all-cameras`).
+    pub other_views: Vec<RenderedView>,
     pub stats: RenderStats,
     /// The run was stopped by `Hooks::stop_requested` before its step count.
     pub interrupted: bool,
+}
+
+/// The image of one more view of a render.
+pub struct RenderedView {
+    /// The camera's name (`NamedCamera::name`).
+    pub name: String,
+    pub image: Image,
+    pub image_sum: Vec<[f32; 4]>,
 }
 
 /// What a caller watches and steers during a render; every method has a do-nothing
@@ -191,8 +216,9 @@ pub trait Hooks {
     fn wants_final_checkpoint(&self) -> bool {
         false
     }
-    /// The iteration state and the image so far.
-    fn checkpoint(&mut self, _checkpoint: Checkpoint, _image: &Image) -> Result<()> {
+    /// The iteration state and the image of every view so far (in `RenderOptions::views`
+    /// order).
+    fn checkpoint(&mut self, _checkpoint: Checkpoint, _images: &[Image]) -> Result<()> {
         Ok(())
     }
 }
@@ -279,13 +305,18 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
     fit("the rasterised triangles", n * 3 * std::mem::size_of::<RasterVertex>() as u64, fewer)?;
     fit("the iteration state", n * std::mem::size_of::<GpuPatchState>() as u64, fewer)?;
     let max_dim = limits.max_texture_dimension_2d;
-    if options.width > max_dim || options.height > max_dim {
-        return Err(Error::Limits(format!(
-            "the image {}x{} exceeds the device's largest texture side {max_dim}; use a smaller --width/--height",
-            options.width, options.height
-        )));
+    let sizes = match options.cameras.is_empty() {
+        true => vec![(options.width, options.height)],
+        false => options.cameras.iter().map(|c| (c.camera.width, c.camera.height)).collect(),
+    };
+    for (width, height) in sizes {
+        if width > max_dim || height > max_dim {
+            return Err(Error::Limits(format!(
+                "the image {width}x{height} exceeds the device's largest texture side {max_dim}; use a smaller --width/--height"
+            )));
+        }
+        fit("the image", width as u64 * height as u64 * 16, "use a smaller --width/--height")?;
     }
-    fit("the image", options.width as u64 * options.height as u64 * 16, "use a smaller --width/--height")?;
     // The stages check these too, but only once the first shot (or the first shot and the
     // bundle buffers) exist: here they are refused before any GPU work, and the bundle's
     // line table, which no stage checked, cannot reach wgpu as a validation panic.
@@ -329,18 +360,30 @@ pub fn render_with(
     Renderer::new(ctx, scene, patches, options, hooks)?.run(resume, hooks)
 }
 
-/// One render, set up: the scene on the GPU, its first-shot table, the camera item buffer,
-/// the image sum and the iteration state, owned together. `step_stages` is the one
-/// description of a step, which `run` (the CLI and the tests), the benchmark harness and
-/// its stage profiler all use.
+/// What belongs to one view of a render: its camera, its camera item buffer and its image
+/// estimate (the running image sum). Everything else a step computes (the iteration state,
+/// the step's bundle and what each patch sends the image, the lights' windows of a pass) is
+/// view-independent and shared by every view, so a view costs its image stages only.
+pub struct ViewImage {
+    pub name: String,
+    /// The camera, at the image's size (`Camera::width`, `Camera::height`).
+    pub camera: Camera,
+    item_buffer: CameraItemBuffer,
+    estimate: ImageEstimate,
+}
+
+/// One render, set up: the scene on the GPU, its first-shot table, the iteration state and
+/// its views (each a camera item buffer and an image sum), owned together. `step_stages` is
+/// the one description of a step, which `run` (the CLI and the tests), the benchmark
+/// harness and its stage profiler all use.
 pub struct Renderer<'a> {
     ctx: &'a Context,
     scene: &'a Scene,
     options: RenderOptions,
     buffers: SceneBuffers,
-    camera: CameraItemBuffer,
     direct: DirectLights,
-    estimate: ImageEstimate,
+    /// One per camera (`RenderOptions::views`), never empty.
+    views: Vec<ViewImage>,
     /// The bundle stages; `None` for a first-shot-only image (`iterations == 0`).
     iteration: Option<Iteration>,
     /// Steps before the first one averaged into the image.
@@ -374,7 +417,6 @@ impl<'a> Renderer<'a> {
         let device = &ctx.device;
         let upload = Instant::now();
         let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
-        let camera = CameraItemBuffer::new(device, options.width, options.height);
         let upload_ms = milliseconds(upload);
         let first_shot = if !options.first_shot || patches.samples.is_empty() {
             None
@@ -392,8 +434,17 @@ impl<'a> Renderer<'a> {
                 .unwrap_or_else(|| fragment_bound(patches, buffers.radius, options.bundle_resolution));
             Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
         };
-        let estimate = ImageEstimate::new(device, &buffers, &camera, &direct, iteration.as_ref().map(|i| &i.gather));
-        estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count());
+        let views = options
+            .views(scene)
+            .into_iter()
+            .map(|NamedCamera { name, camera }| {
+                let item_buffer = CameraItemBuffer::new(device, camera.width, camera.height);
+                let gather = iteration.as_ref().map(|i| &i.gather);
+                let estimate = ImageEstimate::new(device, &buffers, &item_buffer, &direct, gather);
+                estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count());
+                ViewImage { name, camera, item_buffer, estimate }
+            })
+            .collect();
         let burn_in = burn_in_steps(scene, options);
         Ok(Renderer {
             ctx,
@@ -401,9 +452,8 @@ impl<'a> Renderer<'a> {
             options: options.clone(),
             near: buffers.radius * 1e-5,
             buffers,
-            camera,
             direct,
-            estimate,
+            views,
             iteration,
             burn_in,
             direct_due: true,
@@ -469,10 +519,19 @@ impl<'a> Renderer<'a> {
         }
     }
 
+    /// Every view's camera uniform, with the sample at `jitter` inside each pixel: the views
+    /// share the step's sample, so each view's image is that of a run with its camera alone.
     fn write_camera(&self, jitter: [f32; 2]) {
-        let (o, near) = (&self.options, self.near);
-        let cam = gpu_camera(&self.scene.camera, o.width, o.height, near, jitter);
-        self.ctx.queue.write_buffer(&self.camera.camera, 0, bytemuck::bytes_of(&cam));
+        for view in &self.views {
+            let c = &view.camera;
+            let cam = gpu_camera(c, c.width, c.height, self.near, jitter);
+            self.ctx.queue.write_buffer(&view.item_buffer.camera, 0, bytemuck::bytes_of(&cam));
+        }
+    }
+
+    /// The views, in order.
+    pub fn views(&self) -> &[ViewImage] {
+        &self.views
     }
 
     /// The stages of step `k`, in order (its uniforms written by `write_step`): the bundle
@@ -485,29 +544,37 @@ impl<'a> Renderer<'a> {
         stages
     }
 
-    /// The stages that add one estimate of every pixel to the image sum: the camera item
-    /// buffer, then, if `direct`, the area lights' windows at this pass's points and the
-    /// estimate of Le + D, then, if `gather`, the estimate of G through this step's bundle.
+    /// The stages that add one estimate of every pixel of every view to its image sum: per
+    /// view the camera item buffer, then, if `direct`, the estimate of Le + D, then, if
+    /// `gather`, the estimate of G through this step's bundle. The area lights' windows at
+    /// this pass's points, which every view's Le + D reads, are rendered once, after the
+    /// first view's item buffer.
     fn image_stages(&self, direct: bool, gather: bool) -> Vec<Stage<'_>> {
-        let (camera, estimate, buffers, lights) = (&self.camera, &self.estimate, &self.buffers, &self.direct);
+        let (buffers, lights) = (&self.buffers, &self.direct);
         let windows_due = direct && self.windows_due;
-        let mut stages: Vec<Stage<'_>> = vec![(
-            "camera",
-            Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
-        )];
-        if direct {
+        let mut stages: Vec<Stage<'_>> = Vec::new();
+        for (v, view) in self.views.iter().enumerate() {
+            let (camera, estimate) = (&view.item_buffer, &view.estimate);
             stages.push((
-                "light_windows",
-                Box::new(move |e: &mut wgpu::CommandEncoder| {
-                    if windows_due {
-                        lights.record_pass(e, buffers)
-                    }
-                }),
+                "camera",
+                Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
             ));
-            stages.push(("direct", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_direct(e))));
-        }
-        if gather {
-            stages.push(("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e))));
+            if direct && v == 0 {
+                stages.push((
+                    "light_windows",
+                    Box::new(move |e: &mut wgpu::CommandEncoder| {
+                        if windows_due {
+                            lights.record_pass(e, buffers)
+                        }
+                    }),
+                ));
+            }
+            if direct {
+                stages.push(("direct", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_direct(e))));
+            }
+            if gather {
+                stages.push(("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e))));
+            }
         }
         stages
     }
@@ -558,10 +625,21 @@ impl<'a> Renderer<'a> {
         crate::gpu::buffers::read_back(&self.ctx.device, &self.ctx.queue, b, b.size())
     }
 
-    /// The image so far: the mean of the estimates.
+    /// The image of the first view so far: the mean of the estimates.
     pub fn read_image(&self) -> Result<Image> {
-        let pixels = self.estimate.read_mean(&self.ctx.device, &self.ctx.queue)?;
-        Ok(Image::new(self.options.width, self.options.height, pixels))
+        self.read_view_image(0)
+    }
+
+    /// The image of view `v` so far.
+    pub fn read_view_image(&self, v: usize) -> Result<Image> {
+        let view = &self.views[v];
+        let pixels = view.estimate.read_mean(&self.ctx.device, &self.ctx.queue)?;
+        Ok(Image::new(view.camera.width, view.camera.height, pixels))
+    }
+
+    /// The images of every view so far.
+    fn read_images(&self) -> Result<Vec<Image>> {
+        (0..self.views.len()).map(|v| self.read_view_image(v)).collect()
     }
 
     /// Runs the render to its end (or until the hooks stop it) and reads the image back.
@@ -585,16 +663,22 @@ impl<'a> Renderer<'a> {
             0 => iteration_stats.steps.saturating_sub(self.burn_in),
             passes => passes,
         };
-        let image_sum = self.estimate.read_sum(&self.ctx.device, &self.ctx.queue)?;
-        let pixels = crate::stages::image_estimate::image_of_sums(&image_sum)?;
-        let image = Image::new(self.options.width, self.options.height, pixels);
+        let mut images = Vec::with_capacity(self.views.len());
+        for view in &self.views {
+            let image_sum = view.estimate.read_sum(&self.ctx.device, &self.ctx.queue)?;
+            let pixels = crate::stages::image_estimate::image_of_sums(&image_sum)?;
+            let image = Image::new(view.camera.width, view.camera.height, pixels);
+            images.push(RenderedView { name: view.name.clone(), image, image_sum });
+        }
+        let first = images.remove(0);
         let image_ms = milliseconds(image_start);
         self.ctx.check()?;
         let (o, fs) = (&self.options, self.first_shot.as_ref());
         Ok(Rendered {
             interrupted: iteration_stats.interrupted || direct.interrupted,
-            image,
-            image_sum,
+            image: first.image,
+            image_sum: first.image_sum,
+            other_views: images,
             stats: RenderStats {
                 adapter: self.ctx.summary.clone(),
                 scene: self.scene.source.display().to_string(),
@@ -672,28 +756,37 @@ impl<'a> Renderer<'a> {
         Ok(done)
     }
 
-    fn checkpoint(&self, step: u32) -> Result<(Checkpoint, Image)> {
+    /// The state after `step` steps, with the image sums of every view one after another.
+    fn checkpoint(&self, step: u32) -> Result<(Checkpoint, Vec<Image>)> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let image_sum = &self.estimate.image_sum;
+        let mut image_sum = Vec::new();
+        for view in &self.views {
+            let sum = &view.estimate.image_sum;
+            image_sum.extend(crate::gpu::buffers::read_back::<u8>(device, queue, sum, sum.size())?);
+        }
         let checkpoint = Checkpoint {
             fingerprint: fingerprint(self.scene, &self.options),
             step,
             state: self.read_state()?,
-            image_sum: crate::gpu::buffers::read_back(device, queue, image_sum, image_sum.size())?,
+            image_sum,
         };
-        Ok((checkpoint, self.read_image()?))
+        Ok((checkpoint, self.read_images()?))
     }
 
-    /// Puts a checkpoint's state and image sum on the GPU; returns its step. Its
+    /// Puts a checkpoint's state and image sums on the GPU; returns its step. Its
     /// fingerprint was checked where it was read (`main.rs`); the sizes guard the copies.
     fn restore(&self, c: &Checkpoint) -> Result<u32> {
-        if c.state.len() as u64 != self.buffers.state.size()
-            || c.image_sum.len() as u64 != self.estimate.image_sum.size()
-        {
+        let sums: u64 = self.views.iter().map(|v| v.estimate.image_sum.size()).sum();
+        if c.state.len() as u64 != self.buffers.state.size() || c.image_sum.len() as u64 != sums {
             return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
         }
         self.ctx.queue.write_buffer(&self.buffers.state, 0, &c.state);
-        self.ctx.queue.write_buffer(&self.estimate.image_sum, 0, &c.image_sum);
+        let mut at = 0;
+        for view in &self.views {
+            let size = view.estimate.image_sum.size() as usize;
+            self.ctx.queue.write_buffer(&view.estimate.image_sum, 0, &c.image_sum[at..at + size]);
+            at += size;
+        }
         Ok(c.step)
     }
 
@@ -718,10 +811,8 @@ impl<'a> Renderer<'a> {
             });
             (b.clone(), copy)
         };
-        let kept = [
-            backup(&self.buffers.state, "firstshot.render.state_backup"),
-            backup(&self.estimate.image_sum, "firstshot.render.image_backup"),
-        ];
+        let mut kept = vec![backup(&self.buffers.state, "firstshot.render.state_backup")];
+        kept.extend(self.views.iter().map(|v| backup(&v.estimate.image_sum, "firstshot.render.image_backup")));
         let copy_all = |to_backup: bool| {
             let mut encoder = device.create_command_encoder(&Default::default());
             for (live, copy) in &kept {
@@ -761,7 +852,9 @@ impl<'a> Renderer<'a> {
                 let (capacity, resolution) = self.bundle_size();
                 let capacity = (capacity as u64).saturating_mul(2);
                 let iteration = Iteration::new(ctx, &self.buffers, resolution, capacity)?;
-                self.estimate.rebind_gather(device, &iteration.gather);
+                for view in &mut self.views {
+                    view.estimate.rebind_gather(device, &iteration.gather);
+                }
                 self.iteration = Some(iteration);
                 interrupted = false;
                 continue;
@@ -770,14 +863,14 @@ impl<'a> Renderer<'a> {
             step += batch;
             hooks.progress(step, total);
             if step > self.burn_in && hooks.checkpoint_due() {
-                let (checkpoint, image) = self.checkpoint(step)?;
-                hooks.checkpoint(checkpoint, &image)?;
+                let (checkpoint, images) = self.checkpoint(step)?;
+                hooks.checkpoint(checkpoint, &images)?;
             }
         }
         ctx.wait()?;
         if hooks.wants_final_checkpoint() && step > self.burn_in {
-            let (checkpoint, image) = self.checkpoint(step)?;
-            hooks.checkpoint(checkpoint, &image)?;
+            let (checkpoint, images) = self.checkpoint(step)?;
+            hooks.checkpoint(checkpoint, &images)?;
         }
         batch_ms.sort_by(f64::total_cmp);
         Ok(IterationStats {

@@ -6,7 +6,7 @@
 
 use super::brdf::max_directional_albedo;
 use super::shapes::{self, LIGHT_PLANARITY, MAX_SIERPINSKI_LEVEL, POLYGON_PLANARITY, Transform};
-use super::{Camera, Light, NamedCamera, Material, MaterialKind, Rgb, Scene, Settings, Surface, Triangle};
+use super::{Camera, Light, Material, MaterialKind, NamedCamera, Rgb, Scene, Settings, Surface, Triangle};
 use crate::{Error, Result};
 use glam::DVec3;
 use std::collections::HashMap;
