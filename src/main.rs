@@ -63,7 +63,7 @@ struct MergeArgs {
 }
 
 #[derive(Args)]
-struct RenderArgs {
+pub(crate) struct RenderArgs {
     /// The scene file (TOML, docs/SCENE_FORMAT.md).
     #[arg(required_unless_present = "list_adapters")]
     scene: Option<PathBuf>,
@@ -124,6 +124,21 @@ struct RenderArgs {
     /// same iteration: one image per camera, OUT_NAME.exr and OUT_NAME.png.
     #[arg(long, conflicts_with = "camera")]
     all_cameras: bool,
+    /// A camera path (TOML keyframes, docs/CAMERA_PATH.md): render a walkthrough of
+    /// --frames frames, OUT_0000.exr ... each with its PNG, from one iteration.
+    #[arg(
+        long,
+        value_name = "PATH",
+        requires_all = ["frames", "steps_per_frame"],
+        conflicts_with_all = ["all_cameras", "iterations", "time", "checkpoint_every", "shard"]
+    )]
+    path: Option<PathBuf>,
+    /// Frames of the walkthrough (--path).
+    #[arg(long, value_name = "N", requires = "path")]
+    frames: Option<u32>,
+    /// Steps of the iteration each frame of the walkthrough averages (--path).
+    #[arg(long, value_name = "K", requires = "path")]
+    steps_per_frame: Option<u32>,
     /// Image width in pixels.
     #[arg(long, value_name = "W")]
     width: Option<u32>,
@@ -158,7 +173,7 @@ struct RenderArgs {
 }
 
 /// A failure and the exit status it maps to (docs/CLI.md: 2 usage or scene error, 1 run failure).
-struct Failure {
+pub(crate) struct Failure {
     status: u8,
     error: anyhow::Error,
 }
@@ -258,7 +273,7 @@ impl Hooks for CliHooks<'_> {
     }
 }
 
-fn usage(message: String) -> Failure {
+pub(crate) fn usage(message: String) -> Failure {
     Failure { status: 2, error: anyhow::anyhow!(message) }
 }
 
@@ -332,12 +347,12 @@ fn print_adapters() -> Result<(), Failure> {
 
 /// Progress messages on stderr, none with --quiet.
 #[derive(Clone, Copy)]
-struct Say {
+pub(crate) struct Say {
     quiet: bool,
 }
 
 impl Say {
-    fn say(self, s: String) {
+    pub(crate) fn say(self, s: String) {
         if !self.quiet {
             say(&s);
         }
@@ -503,6 +518,9 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         scene.select_camera(name).map_err(|e| usage(format!("--camera {name}: {e}")))?;
     }
     let mut options = render_options(&args, &scene)?;
+    if args.path.is_some() {
+        return cli::walkthrough::run(&args, &scene_path, &scene, &options, &stop, say, start);
+    }
     if args.all_cameras {
         // Each camera at its own size, unless --width / --height give every camera theirs.
         options.cameras = scene
@@ -583,7 +601,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
 }
 
 /// The exit of a run that a stop signal ended: 128 + the signal's number.
-fn interrupted(stop: &StopSignals, when: String) -> Failure {
+pub(crate) fn interrupted(stop: &StopSignals, when: String) -> Failure {
     let status = stop.exit_status().unwrap_or(130);
     Failure { status, error: anyhow::anyhow!("interrupted by {} {when}", stop.name()) }
 }

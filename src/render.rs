@@ -223,6 +223,13 @@ pub trait Hooks {
     }
 }
 
+/// What a walkthrough (`render_path`) does with each frame.
+pub trait FrameHooks: Hooks {
+    /// Frame `index` is done after `step` steps: its image, and the iteration state
+    /// (`GpuPatchState` bytes) from which the next frame goes on.
+    fn frame(&mut self, index: u32, image: &Image, step: u32, state: Vec<u8>) -> Result<()>;
+}
+
 /// Hooks that watch nothing and never stop.
 pub struct NoHooks;
 impl Hooks for NoHooks {}
@@ -360,6 +367,110 @@ pub fn render_with(
     Renderer::new(ctx, scene, patches, options, hooks)?.run(resume, hooks)
 }
 
+/// Where a walkthrough starts: from nothing, or from the state after some frames (a
+/// checkpoint of `FrameHooks::frame`).
+#[derive(Debug, Clone, Copy)]
+pub struct PathStart<'a> {
+    /// The iteration state after `step` steps.
+    pub state: &'a [u8],
+    pub step: u32,
+}
+
+/// What a walkthrough did.
+#[derive(Debug, Clone)]
+pub struct PathRendered {
+    /// The frames rendered (and handed to `FrameHooks::frame`) by this run.
+    pub frames: std::ops::Range<u32>,
+    /// A stop (`Hooks::stop_requested`) ended the run inside frame `frames.end`, which was
+    /// dropped.
+    pub interrupted: bool,
+    pub burn_in_steps: u32,
+    /// Median wall time of a step.
+    pub iteration_ms_median: f64,
+    pub first_shot_ms: f64,
+    pub total_ms: f64,
+}
+
+/// Renders a walkthrough: one image per camera of `frames` (each at `options.width` x
+/// `options.height`), from one iteration whose state carries on from frame to frame (it is
+/// view-independent). The burn-in runs once, before the first frame; then each frame
+/// averages its own `steps_per_frame` steps (step k of the run is still step k of the
+/// random streams, so a run resumed from a frame's state gives the same frames bit for bit).
+/// The image is restarted at each frame, whose direct-light passes count from its start as
+/// a run's do from the burn-in (`direct_light_due`). `options.iterations` and `time_limit`
+/// are not read.
+pub fn render_path(
+    ctx: &Context,
+    scene: &Scene,
+    patches: &Patches,
+    options: &RenderOptions,
+    frames: &[Camera],
+    steps_per_frame: u32,
+    start: Option<PathStart<'_>>,
+    hooks: &mut dyn FrameHooks,
+) -> Result<PathRendered> {
+    if frames.is_empty() || steps_per_frame == 0 {
+        return Err(Error::Usage("a camera path needs at least one frame of at least one step".into()));
+    }
+    let options = RenderOptions {
+        iterations: (frames.len() as u32).saturating_mul(steps_per_frame).max(1),
+        time_limit: None,
+        cameras: Vec::new(),
+        ..options.clone()
+    };
+    let mut renderer = Renderer::new(ctx, scene, patches, &options, hooks)?;
+    let burn_in = renderer.burn_in;
+    let mut step = 0;
+    if let Some(s) = start {
+        if s.state.len() as u64 != renderer.buffers.state.size() {
+            return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
+        }
+        ctx.queue.write_buffer(&renderer.buffers.state, 0, s.state);
+        step = s.step;
+    }
+    let mut step_ms = Vec::new();
+    if step < burn_in {
+        renderer.image_start = burn_in;
+        let done = renderer.advance(step, burn_in, hooks)?;
+        step = burn_in;
+        step_ms.push(done.step_ms_median);
+    }
+    let first = (step - burn_in) / steps_per_frame;
+    let mut done = PathRendered {
+        frames: first..first,
+        interrupted: false,
+        burn_in_steps: burn_in,
+        iteration_ms_median: 0.0,
+        first_shot_ms: renderer.first_shot.as_ref().map_or(0.0, |f| f.ms),
+        total_ms: 0.0,
+    };
+    for f in first..frames.len() as u32 {
+        renderer.views[0].camera = Camera { width: options.width, height: options.height, ..frames[f as usize] };
+        renderer.clear_images();
+        renderer.image_start = step;
+        let end = step + steps_per_frame;
+        let stats = renderer.advance(step, end, hooks)?;
+        step_ms.push(stats.step_ms_median);
+        if stats.steps < end {
+            done.interrupted = true;
+            break;
+        }
+        step = end;
+        let image = renderer.read_image()?;
+        hooks.frame(f, &image, step, renderer.read_state()?)?;
+        done.frames.end = f + 1;
+        if hooks.stop_requested() && done.frames.end < frames.len() as u32 {
+            done.interrupted = true;
+            break;
+        }
+    }
+    ctx.check()?;
+    step_ms.sort_by(f64::total_cmp);
+    done.iteration_ms_median = step_ms.get(step_ms.len() / 2).copied().unwrap_or(0.0);
+    done.total_ms = milliseconds(renderer.start);
+    Ok(done)
+}
+
 /// What belongs to one view of a render: its camera, its camera item buffer and its image
 /// estimate (the running image sum). Everything else a step computes (the iteration state,
 /// the step's bundle and what each patch sends the image, the lights' windows of a pass) is
@@ -388,6 +499,9 @@ pub struct Renderer<'a> {
     iteration: Option<Iteration>,
     /// Steps before the first one averaged into the image.
     burn_in: u32,
+    /// The step whose estimate is the image's first: the burn-in, or a frame's first step
+    /// (`render_path`), which counts its direct-light passes from there.
+    image_start: u32,
     /// Whether this pass estimates the direct light (`image_stages`).
     direct_due: bool,
     /// Whether this pass renders the area lights' windows at new points.
@@ -456,6 +570,7 @@ impl<'a> Renderer<'a> {
             views,
             iteration,
             burn_in,
+            image_start: burn_in,
             direct_due: true,
             windows_due: true,
             first_shot,
@@ -504,13 +619,13 @@ impl<'a> Renderer<'a> {
     /// generator.
     pub fn write_step(&mut self, k: u32) {
         let queue = &self.ctx.queue;
-        let image_step = k >= self.burn_in;
+        let image_step = k >= self.image_start;
         let mut rng =
             self.iteration().write_bundle(queue, self.options.seed, k as u64, image_step, &self.bundle_scene());
         if image_step {
             let jitter = [rng.uniform() as f32, rng.uniform() as f32];
             self.write_camera(jitter);
-            let i = k - self.burn_in;
+            let i = k - self.image_start;
             self.direct_due = direct_light_due(i, &self.options);
             if self.direct_due {
                 let pass = direct_light_estimates(i, &self.options) as u64;
@@ -534,11 +649,20 @@ impl<'a> Renderer<'a> {
         &self.views
     }
 
+    /// Zeroes every view's image sum (a frame of a walkthrough starts its own average).
+    fn clear_images(&self) {
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        for view in &self.views {
+            view.estimate.clear(&mut encoder);
+        }
+        self.ctx.queue.submit([encoder.finish()]);
+    }
+
     /// The stages of step `k`, in order (its uniforms written by `write_step`): the bundle
     /// stages of the iteration, then, past the burn-in, the image stages.
     pub fn step_stages(&self, k: u32) -> Vec<Stage<'_>> {
         let mut stages = self.iteration().stages(&self.buffers);
-        if k >= self.burn_in {
+        if k >= self.image_start {
             stages.extend(self.image_stages(self.direct_due, true));
         }
         stages
@@ -795,13 +919,20 @@ impl<'a> Renderer<'a> {
     /// image sum are kept at each batch's start, so a batch in which a line ran out of
     /// fragment room is redone, exactly, with a larger list.
     fn iterate(&mut self, resume: Option<&Checkpoint>, hooks: &mut dyn Hooks) -> Result<IterationStats> {
-        let (ctx, options) = (self.ctx, self.options.clone());
-        let device = &ctx.device;
-        let started = Instant::now();
-        let mut step = match resume {
+        let step = match resume {
             Some(c) => self.restore(c)?,
             None => 0,
         };
+        let total = self.options.iterations.saturating_add(self.burn_in);
+        self.advance(step, total, hooks)
+    }
+
+    /// Steps `step..total` (fewer if `time_limit` or the hooks end them), those from
+    /// `image_start` on each adding one image estimate, in batches (`iterate`).
+    fn advance(&mut self, mut step: u32, total: u32, hooks: &mut dyn Hooks) -> Result<IterationStats> {
+        let (ctx, options) = (self.ctx, self.options.clone());
+        let device = &ctx.device;
+        let started = Instant::now();
         let backup = |b: &wgpu::Buffer, label: &str| {
             let copy = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -823,7 +954,6 @@ impl<'a> Renderer<'a> {
         };
         let mut batch_ms = Vec::new();
         let mut interrupted = false;
-        let total = options.iterations.saturating_add(self.burn_in);
         while step < total && !interrupted {
             // Past the time limit (even within the burn-in: `run` then makes a direct image).
             if options.time_limit.is_some_and(|limit| self.start.elapsed() >= limit) {
@@ -838,7 +968,7 @@ impl<'a> Renderer<'a> {
                 batch += 1;
                 // A stop waits for the burn-in and one image step, so that there is an image
                 // to write (and a checkpoint to resume from).
-                if hooks.stop_requested() && step + batch > self.burn_in {
+                if hooks.stop_requested() && step + batch > self.image_start {
                     interrupted = true;
                     break;
                 }
@@ -862,13 +992,13 @@ impl<'a> Renderer<'a> {
             batch_ms.push(batch_start.elapsed().as_secs_f64() * 1e3 / batch as f64);
             step += batch;
             hooks.progress(step, total);
-            if step > self.burn_in && hooks.checkpoint_due() {
+            if step > self.image_start && hooks.checkpoint_due() {
                 let (checkpoint, images) = self.checkpoint(step)?;
                 hooks.checkpoint(checkpoint, &images)?;
             }
         }
         ctx.wait()?;
-        if hooks.wants_final_checkpoint() && step > self.burn_in {
+        if hooks.wants_final_checkpoint() && step > self.image_start {
             let (checkpoint, images) = self.checkpoint(step)?;
             hooks.checkpoint(checkpoint, &images)?;
         }
