@@ -182,7 +182,7 @@ pub fn run(
         return Err(interrupted(
             stop,
             format!(
-                "after frame {} of {frames}: continue with the same flags and --resume ({})",
+                "after {} of {frames} frames (the frame in progress is dropped): continue with the same flags and --resume ({})",
                 done.frames.end,
                 plan.checkpoint.display()
             ),
