@@ -367,8 +367,18 @@ pub fn render_with(
     Renderer::new(ctx, scene, patches, options, hooks)?.run(resume, hooks)
 }
 
-/// Where a walkthrough starts: from nothing, or from the state after some frames (a
-/// checkpoint of `FrameHooks::frame`).
+/// A walkthrough to render: its frames' cameras, the steps each averages, and where it
+/// starts.
+#[derive(Debug, Clone, Copy)]
+pub struct Walkthrough<'a> {
+    pub frames: &'a [Camera],
+    pub steps_per_frame: u32,
+    /// `None`: from nothing.
+    pub start: Option<PathStart<'a>>,
+}
+
+/// Where a walkthrough starts: from the state after some frames (a checkpoint of
+/// `FrameHooks::frame`).
 #[derive(Debug, Clone, Copy)]
 pub struct PathStart<'a> {
     /// The iteration state after `step` steps.
@@ -391,10 +401,10 @@ pub struct PathRendered {
     pub total_ms: f64,
 }
 
-/// Renders a walkthrough: one image per camera of `frames` (each at `options.width` x
+/// Renders a walkthrough: one image per camera of `walk.frames` (each at `options.width` x
 /// `options.height`), from one iteration whose state carries on from frame to frame (it is
 /// view-independent). The burn-in runs once, before the first frame; then each frame
-/// averages its own `steps_per_frame` steps (step k of the run is still step k of the
+/// averages its own `walk.steps_per_frame` steps (step k of the run is still step k of the
 /// random streams, so a run resumed from a frame's state gives the same frames bit for bit).
 /// The image is restarted at each frame, whose direct-light passes count from its start as
 /// a run's do from the burn-in (`direct_light_due`). `options.iterations` and `time_limit`
@@ -404,11 +414,10 @@ pub fn render_path(
     scene: &Scene,
     patches: &Patches,
     options: &RenderOptions,
-    frames: &[Camera],
-    steps_per_frame: u32,
-    start: Option<PathStart<'_>>,
+    walk: &Walkthrough<'_>,
     hooks: &mut dyn FrameHooks,
 ) -> Result<PathRendered> {
+    let Walkthrough { frames, steps_per_frame, start } = *walk;
     if frames.is_empty() || steps_per_frame == 0 {
         return Err(Error::Usage("a camera path needs at least one frame of at least one step".into()));
     }

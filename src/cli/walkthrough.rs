@@ -10,7 +10,7 @@ use anyhow::Context as _;
 use firstshot::checkpoint::{Checkpoint, fnv1a};
 use firstshot::gpu::context::Context;
 use firstshot::image::Image;
-use firstshot::render::{FrameHooks, Hooks, PathStart, RenderOptions, render_path};
+use firstshot::render::{FrameHooks, Hooks, PathStart, RenderOptions, Walkthrough, render_path};
 use firstshot::scene::camera_path::{CameraPath, load_path};
 use firstshot::scene::{Camera, Scene};
 use std::path::Path;
@@ -151,7 +151,8 @@ pub fn run(
         frame_start: Instant::now(),
     };
     let start_state = resume.as_ref().map(|c| PathStart { state: &c.state, step: c.step });
-    let result = render_path(&ctx, scene, &patches, &options, &cameras, steps, start_state, &mut writer);
+    let walk = Walkthrough { frames: &cameras, steps_per_frame: steps, start: start_state };
+    let result = render_path(&ctx, scene, &patches, &options, &walk, &mut writer);
     let done = match result {
         Err(e) if e.is_usage() => {
             plan.undo_folders();
