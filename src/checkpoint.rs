@@ -23,7 +23,8 @@ pub struct Checkpoint {
     pub step: u32,
     /// The `GpuPatchState` buffer, byte for byte.
     pub state: Vec<u8>,
-    /// The image sum (vec4<f32> per pixel), byte for byte.
+    /// The image sum (vec4<f32> per pixel), byte for byte; with several views
+    /// (`--all-cameras`) their sums one after another, in the order of the views.
     pub image_sum: Vec<u8>,
 }
 
@@ -92,9 +93,16 @@ impl Checkpoint {
     /// n image steps hold `direct_estimates(n)` estimates of the direct light. Every number
     /// of the state and of the image sum must be finite, and every pixel's weights (the
     /// fourth component of its two sums, `stages::image_estimate`) must be those direct-light
-    /// estimates and the `step - burn_in` image steps. A refusal names the file (exit status
-    /// 2), instead of a GPU failure later.
-    pub fn check_numbers(&self, path: &Path, burn_in: u32, direct_estimates: &dyn Fn(u32) -> u32) -> Result<()> {
+    /// estimates and the `step - burn_in` image steps. `view_pixels`: the pixels of each
+    /// view, whose image sums follow one another; `None`, a single view of any size. A
+    /// refusal names the file (exit status 2), instead of a GPU failure later.
+    pub fn check_numbers(
+        &self,
+        path: &Path,
+        burn_in: u32,
+        direct_estimates: &dyn Fn(u32) -> u32,
+        view_pixels: Option<&[u64]>,
+    ) -> Result<()> {
         if !self.state.len().is_multiple_of(4) || !self.image_sum.len().is_multiple_of(16) {
             return Err(corrupt(path, "its arrays are not whole numbers"));
         }
@@ -111,15 +119,28 @@ impl Checkpoint {
         if sum.iter().any(|v| !v.is_finite()) {
             return Err(corrupt(path, "its image holds numbers that are not finite"));
         }
-        let (direct, gathered) = sum.split_at(sum.len() / 8 * 4);
+        let one_view = [sum.len() as u64 / 8];
+        let view_pixels = view_pixels.unwrap_or(&one_view);
+        if view_pixels.iter().map(|p| p * 8).sum::<u64>() != sum.len() as u64 {
+            return Err(corrupt(path, "its images are not of this run's cameras and sizes"));
+        }
         let direct_passes = direct_estimates(image_steps);
-        if direct.chunks_exact(4).any(|p| p[3] != direct_passes as f32)
-            || gathered.chunks_exact(4).any(|p| p[3] != image_steps as f32)
-        {
-            return Err(corrupt(
-                path,
-                &format!("its image's weights are not those of the {image_steps} image steps of step {}", self.step),
-            ));
+        let mut rest = &sum[..];
+        for &pixels in view_pixels {
+            let (view, after) = rest.split_at(pixels as usize * 8);
+            rest = after;
+            let (direct, gathered) = view.split_at(view.len() / 2);
+            if direct.chunks_exact(4).any(|p| p[3] != direct_passes as f32)
+                || gathered.chunks_exact(4).any(|p| p[3] != image_steps as f32)
+            {
+                return Err(corrupt(
+                    path,
+                    &format!(
+                        "its image's weights are not those of the {image_steps} image steps of step {}",
+                        self.step
+                    ),
+                ));
+            }
         }
         Ok(())
     }
@@ -167,9 +188,9 @@ mod tests {
             state: [0.5f32; 8].iter().flat_map(|v| v.to_le_bytes()).collect(),
             image_sum: [pixel(0.25, 2.0), pixel(3.0, 2.0)].concat(),
         };
-        good.check_numbers(p, 10, &|n| n).unwrap();
+        good.check_numbers(p, 10, &|n| n, None).unwrap();
         let refused = |c: &Checkpoint, burn_in: u32, part: &str| {
-            let e = c.check_numbers(p, burn_in, &|n| n).expect_err(part).to_string();
+            let e = c.check_numbers(p, burn_in, &|n| n, None).expect_err(part).to_string();
             assert!(e.contains("x.checkpoint") && e.contains(part), "{e}");
             assert!(Checkpoint::from_bytes(p, &c.to_bytes()).is_ok(), "the checksum alone passes it");
         };

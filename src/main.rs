@@ -63,7 +63,7 @@ struct MergeArgs {
 }
 
 #[derive(Args)]
-struct RenderArgs {
+pub(crate) struct RenderArgs {
     /// The scene file (TOML, docs/SCENE_FORMAT.md).
     #[arg(required_unless_present = "list_adapters")]
     scene: Option<PathBuf>,
@@ -121,6 +121,25 @@ struct RenderArgs {
     /// entry's name (default: the first of the scene's cameras).
     #[arg(long, value_name = "NAME")]
     camera: Option<String>,
+    /// Render every camera of the scene ([camera], then each [[cameras]] entry) from the
+    /// same iteration: one image per camera, OUT_NAME.exr and OUT_NAME.png.
+    #[arg(long, conflicts_with = "camera")]
+    all_cameras: bool,
+    /// A camera path (TOML keyframes, docs/CAMERA_PATH.md): render a walkthrough of
+    /// --frames frames, OUT_0000.exr ... each with its PNG, from one iteration.
+    #[arg(
+        long,
+        value_name = "PATH",
+        requires_all = ["frames", "steps_per_frame"],
+        conflicts_with_all = ["all_cameras", "iterations", "time", "checkpoint_every", "shard"]
+    )]
+    path: Option<PathBuf>,
+    /// Frames of the walkthrough (--path).
+    #[arg(long, value_name = "N", requires = "path")]
+    frames: Option<u32>,
+    /// Steps of the iteration each frame of the walkthrough averages (--path).
+    #[arg(long, value_name = "K", requires = "path")]
+    steps_per_frame: Option<u32>,
     /// Image width in pixels.
     #[arg(long, value_name = "W")]
     width: Option<u32>,
@@ -155,7 +174,7 @@ struct RenderArgs {
 }
 
 /// A failure and the exit status it maps to (docs/CLI.md: 2 usage or scene error, 1 run failure).
-struct Failure {
+pub(crate) struct Failure {
     status: u8,
     error: anyhow::Error,
 }
@@ -183,8 +202,8 @@ struct CliHooks<'a> {
     checkpoint_every: Option<Duration>,
     last_checkpoint: Instant,
     checkpoint_path: PathBuf,
-    exr_path: PathBuf,
-    png_path: PathBuf,
+    /// One per view, in order.
+    images: Vec<cli::outputs::ImagePaths>,
     attributes: &'a dyn Fn(u32) -> [(&'static str, String); 4],
 }
 
@@ -244,16 +263,18 @@ impl Hooks for CliHooks<'_> {
         self.checkpoint_every.is_some() || self.stop_requested()
     }
 
-    fn checkpoint(&mut self, checkpoint: Checkpoint, image: &RenderedImage) -> firstshot::Result<()> {
-        image.write_exr(&self.exr_path, &(self.attributes)(checkpoint.step))?;
-        image.write_png(&self.png_path, image.auto_exposure())?;
+    fn checkpoint(&mut self, checkpoint: Checkpoint, images: &[RenderedImage]) -> firstshot::Result<()> {
+        for (image, paths) in images.iter().zip(&self.images) {
+            image.write_exr(&paths.exr, &(self.attributes)(checkpoint.step))?;
+            image.write_png(&paths.png, image.auto_exposure())?;
+        }
         checkpoint.write(&self.checkpoint_path)?;
         self.last_checkpoint = Instant::now();
         Ok(())
     }
 }
 
-fn usage(message: String) -> Failure {
+pub(crate) fn usage(message: String) -> Failure {
     Failure { status: 2, error: anyhow::anyhow!(message) }
 }
 
@@ -327,12 +348,12 @@ fn print_adapters() -> Result<(), Failure> {
 
 /// Progress messages on stderr, none with --quiet.
 #[derive(Clone, Copy)]
-struct Say {
+pub(crate) struct Say {
     quiet: bool,
 }
 
 impl Say {
-    fn say(self, s: String) {
+    pub(crate) fn say(self, s: String) {
         if !self.quiet {
             say(&s);
         }
@@ -453,7 +474,14 @@ fn read_resume(
         )));
     }
     let burn_in = firstshot::render::burn_in_steps(scene, options);
-    checkpoint.check_numbers(path, burn_in, &|n| firstshot::render::direct_light_estimates(n, options))?;
+    let pixels: Vec<u64> =
+        options.views(scene).iter().map(|v| v.camera.width as u64 * v.camera.height as u64).collect();
+    checkpoint.check_numbers(
+        path,
+        burn_in,
+        &|n| firstshot::render::direct_light_estimates(n, options),
+        Some(&pixels),
+    )?;
     Ok(Some(checkpoint))
 }
 
@@ -491,16 +519,45 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         scene.select_camera(name).map_err(|e| usage(format!("--camera {name}: {e}")))?;
     }
     let mut options = render_options(&args, &scene)?;
+    if args.path.is_some() {
+        return cli::walkthrough::run(&args, &scene_path, &scene, &options, &stop, say, start);
+    }
+    if args.all_cameras {
+        // Each camera at its own size, unless --width / --height give every camera theirs.
+        options.cameras = scene
+            .cameras
+            .iter()
+            .map(|c| {
+                let (width, height) = (args.width.unwrap_or(c.camera.width), args.height.unwrap_or(c.camera.height));
+                scene::NamedCamera { name: c.name.clone(), camera: scene::Camera { width, height, ..c.camera } }
+            })
+            .collect();
+    }
     let checkpoint_every = args.checkpoint_every.map(|s| seconds("--checkpoint-every", s)).transpose()?;
     // A shard (docs/DISTRIBUTED.md): its own seed and share of the steps, its own file names.
     let shard = firstshot::shard::from_cli(args.shard.as_deref(), args.shard_count)?;
+    if args.all_cameras && shard.is_some() {
+        return Err(usage(
+            "--all-cameras with a shard: a shard's part holds one image; render the cameras' shards one camera at a time (--camera NAME)".into(),
+        ));
+    }
     let shard = shard.map(|s| s.apply(&scene, &mut options)).transpose()?;
     let exr = cli::outputs::exr_path(args.out.as_deref(), &scene_path)?;
     let (exr, stats) = match &shard {
         Some(s) => (s.shard.path(&exr), args.stats.as_deref().map(|p| s.shard.path(p))),
         None => (exr, args.stats.clone()),
     };
-    let mut plan = OutputPlan::new(&exr, stats.as_deref(), &scene_path, shard.is_some())?;
+    let mut plan = if args.all_cameras {
+        // OUT_NAME.exr per camera; the checkpoint (all the cameras' image sums) is OUT.checkpoint.
+        let exrs = options
+            .cameras
+            .iter()
+            .map(|c| cli::outputs::exr_beside(&exr, &c.name, "--all-cameras: camera"))
+            .collect::<Result<Vec<_>, _>>()?;
+        OutputPlan::with_images(&exr, &exrs, stats.as_deref(), &scene_path, false)?
+    } else {
+        OutputPlan::new(&exr, stats.as_deref(), &scene_path, shard.is_some())?
+    };
     firstshot::render::check_options(&scene, &options)?;
     say.say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
 
@@ -548,7 +605,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
 }
 
 /// The exit of a run that a stop signal ended: 128 + the signal's number.
-fn interrupted(stop: &StopSignals, when: String) -> Failure {
+pub(crate) fn interrupted(stop: &StopSignals, when: String) -> Failure {
     let status = stop.exit_status().unwrap_or(130);
     Failure { status, error: anyhow::anyhow!("interrupted by {} {when}", stop.name()) }
 }
@@ -577,8 +634,7 @@ impl Job<'_> {
             checkpoint_every: self.checkpoint_every,
             last_checkpoint: Instant::now(),
             checkpoint_path: self.paths.checkpoint.clone(),
-            exr_path: self.paths.exr.clone(),
-            png_path: self.paths.png.clone(),
+            images: self.paths.images.clone(),
             attributes: &attributes,
         };
         let result = render_with(self.ctx, self.scene, self.patches, self.options, resume.as_ref(), &mut hooks);
@@ -606,8 +662,11 @@ impl Job<'_> {
         let (options, stats, paths) = (self.options, &rendered.stats, self.paths);
         let t = Instant::now();
         let steps = if options.iterations == 0 { 0 } else { stats.iterations };
-        rendered.image.write_exr(&paths.exr, &self.attributes(steps))?;
-        rendered.image.write_png(&paths.png, rendered.image.auto_exposure())?;
+        let images = std::iter::once(&rendered.image).chain(rendered.other_views.iter().map(|v| &v.image));
+        for (image, to) in images.zip(&paths.images) {
+            image.write_exr(&to.exr, &self.attributes(steps))?;
+            image.write_png(&to.png, image.auto_exposure())?;
+        }
         if let (Some(run), Some(part)) = (&self.shard, &paths.part) {
             let scene = self.scene_path.display().to_string();
             let (w, h) = (options.width, options.height);
@@ -633,10 +692,11 @@ impl Job<'_> {
                 r = options.bundle_resolution
             ));
         }
+        let written: Vec<String> =
+            paths.images.iter().map(|i| format!("{} and {}", i.exr.display(), i.png.display())).collect();
         self.say.say(format!(
-            "wrote {} and {} in {:.0} ms ({:.0} ms in all)",
-            paths.exr.display(),
-            paths.png.display(),
+            "wrote {} in {:.0} ms ({:.0} ms in all)",
+            written.join(", "),
             t.elapsed().as_secs_f64() * 1e3,
             self.start.elapsed().as_secs_f64() * 1e3
         ));

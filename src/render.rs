@@ -11,7 +11,7 @@ use crate::image::Image;
 use crate::iteration::{BundleScene, Iteration, fragment_bound};
 use crate::layout::*;
 use crate::rng::StepRng;
-use crate::scene::{Patches, Scene};
+use crate::scene::{Camera, NamedCamera, Patches, Scene};
 use crate::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
 use crate::stages::image_estimate::ImageEstimate;
 use crate::{Error, Result};
@@ -70,6 +70,9 @@ pub struct RenderOptions {
     /// the area lights and their window item buffers, the costliest image stages); the
     /// indirect light G is estimated every step.
     pub window_steps: u32,
+    /// The cameras whose images one run makes from the same iteration (`--all-cameras`), each
+    /// at its own `width` x `height`; empty: `scene.camera` at `width` x `height` above.
+    pub cameras: Vec<NamedCamera>,
 }
 
 impl RenderOptions {
@@ -90,7 +93,18 @@ impl RenderOptions {
             direct_passes: DEFAULT_DIRECT_PASSES,
             burn_in: None,
             window_steps: DEFAULT_WINDOW_STEPS,
+            cameras: Vec::new(),
         }
+    }
+
+    /// The views of the render, in order: `cameras`, or the scene's camera at `width` x
+    /// `height` (named "camera").
+    pub fn views(&self, scene: &Scene) -> Vec<NamedCamera> {
+        if !self.cameras.is_empty() {
+            return self.cameras.clone();
+        }
+        let camera = Camera { width: self.width, height: self.height, ..scene.camera };
+        vec![NamedCamera { name: "camera".into(), camera }]
     }
 }
 
@@ -161,13 +175,24 @@ pub struct RenderStats {
 
 /// The rendered image and how it was made.
 pub struct Rendered {
+    /// The image of the first view (`RenderOptions::views`).
     pub image: Image,
     /// The raw image sum the image is the mean of (rgb sum, w the number of estimates per
     /// pixel), row by row: what a shard's part file keeps (`merge`).
     pub image_sum: Vec<[f32; 4]>,
+    /// The images of the views after the first, in order (`--all-cameras`).
+    pub other_views: Vec<RenderedView>,
     pub stats: RenderStats,
     /// The run was stopped by `Hooks::stop_requested` before its step count.
     pub interrupted: bool,
+}
+
+/// The image of one more view of a render.
+pub struct RenderedView {
+    /// The camera's name (`NamedCamera::name`).
+    pub name: String,
+    pub image: Image,
+    pub image_sum: Vec<[f32; 4]>,
 }
 
 /// What a caller watches and steers during a render; every method has a do-nothing
@@ -191,10 +216,18 @@ pub trait Hooks {
     fn wants_final_checkpoint(&self) -> bool {
         false
     }
-    /// The iteration state and the image so far.
-    fn checkpoint(&mut self, _checkpoint: Checkpoint, _image: &Image) -> Result<()> {
+    /// The iteration state and the image of every view so far (in `RenderOptions::views`
+    /// order).
+    fn checkpoint(&mut self, _checkpoint: Checkpoint, _images: &[Image]) -> Result<()> {
         Ok(())
     }
+}
+
+/// What a walkthrough (`render_path`) does with each frame.
+pub trait FrameHooks: Hooks {
+    /// Frame `index` is done after `step` steps: its image, and the iteration state
+    /// (`GpuPatchState` bytes) from which the next frame goes on.
+    fn frame(&mut self, index: u32, image: &Image, step: u32, state: Vec<u8>) -> Result<()>;
 }
 
 /// Hooks that watch nothing and never stop.
@@ -279,13 +312,18 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
     fit("the rasterised triangles", n * 3 * std::mem::size_of::<RasterVertex>() as u64, fewer)?;
     fit("the iteration state", n * std::mem::size_of::<GpuPatchState>() as u64, fewer)?;
     let max_dim = limits.max_texture_dimension_2d;
-    if options.width > max_dim || options.height > max_dim {
-        return Err(Error::Limits(format!(
-            "the image {}x{} exceeds the device's largest texture side {max_dim}; use a smaller --width/--height",
-            options.width, options.height
-        )));
+    let sizes = match options.cameras.is_empty() {
+        true => vec![(options.width, options.height)],
+        false => options.cameras.iter().map(|c| (c.camera.width, c.camera.height)).collect(),
+    };
+    for (width, height) in sizes {
+        if width > max_dim || height > max_dim {
+            return Err(Error::Limits(format!(
+                "the image {width}x{height} exceeds the device's largest texture side {max_dim}; use a smaller --width/--height"
+            )));
+        }
+        fit("the image", width as u64 * height as u64 * 16, "use a smaller --width/--height")?;
     }
-    fit("the image", options.width as u64 * options.height as u64 * 16, "use a smaller --width/--height")?;
     // The stages check these too, but only once the first shot (or the first shot and the
     // bundle buffers) exist: here they are refused before any GPU work, and the bundle's
     // line table, which no stage checked, cannot reach wgpu as a validation panic.
@@ -329,22 +367,150 @@ pub fn render_with(
     Renderer::new(ctx, scene, patches, options, hooks)?.run(resume, hooks)
 }
 
-/// One render, set up: the scene on the GPU, its first-shot table, the camera item buffer,
-/// the image sum and the iteration state, owned together. `step_stages` is the one
-/// description of a step, which `run` (the CLI and the tests), the benchmark harness and
-/// its stage profiler all use.
+/// A walkthrough to render: its frames' cameras, the steps each averages, and where it
+/// starts.
+#[derive(Debug, Clone, Copy)]
+pub struct Walkthrough<'a> {
+    pub frames: &'a [Camera],
+    pub steps_per_frame: u32,
+    /// `None`: from nothing.
+    pub start: Option<PathStart<'a>>,
+}
+
+/// Where a walkthrough starts: from the state after some frames (a checkpoint of
+/// `FrameHooks::frame`).
+#[derive(Debug, Clone, Copy)]
+pub struct PathStart<'a> {
+    /// The iteration state after `step` steps.
+    pub state: &'a [u8],
+    pub step: u32,
+}
+
+/// What a walkthrough did.
+#[derive(Debug, Clone)]
+pub struct PathRendered {
+    /// The frames rendered (and handed to `FrameHooks::frame`) by this run.
+    pub frames: std::ops::Range<u32>,
+    /// A stop (`Hooks::stop_requested`) ended the run inside frame `frames.end`, which was
+    /// dropped.
+    pub interrupted: bool,
+    pub burn_in_steps: u32,
+    /// Median wall time of a step.
+    pub iteration_ms_median: f64,
+    pub first_shot_ms: f64,
+    pub total_ms: f64,
+}
+
+/// Renders a walkthrough: one image per camera of `walk.frames` (each at `options.width` x
+/// `options.height`), from one iteration whose state carries on from frame to frame (it is
+/// view-independent). The burn-in runs once, before the first frame; then each frame
+/// averages its own `walk.steps_per_frame` steps (step k of the run is still step k of the
+/// random streams, so a run resumed from a frame's state gives the same frames bit for bit).
+/// The image is restarted at each frame, whose direct-light passes count from its start as
+/// a run's do from the burn-in (`direct_light_due`). `options.iterations` and `time_limit`
+/// are not read.
+pub fn render_path(
+    ctx: &Context,
+    scene: &Scene,
+    patches: &Patches,
+    options: &RenderOptions,
+    walk: &Walkthrough<'_>,
+    hooks: &mut dyn FrameHooks,
+) -> Result<PathRendered> {
+    let Walkthrough { frames, steps_per_frame, start } = *walk;
+    if frames.is_empty() || steps_per_frame == 0 {
+        return Err(Error::Usage("a camera path needs at least one frame of at least one step".into()));
+    }
+    let options = RenderOptions {
+        iterations: (frames.len() as u32).saturating_mul(steps_per_frame).max(1),
+        time_limit: None,
+        cameras: Vec::new(),
+        ..options.clone()
+    };
+    let mut renderer = Renderer::new(ctx, scene, patches, &options, hooks)?;
+    let burn_in = renderer.burn_in;
+    let mut step = 0;
+    if let Some(s) = start {
+        if s.state.len() as u64 != renderer.buffers.state.size() {
+            return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
+        }
+        ctx.queue.write_buffer(&renderer.buffers.state, 0, s.state);
+        step = s.step;
+    }
+    let mut step_ms = Vec::new();
+    if step < burn_in {
+        renderer.image_start = burn_in;
+        let done = renderer.advance(step, burn_in, hooks)?;
+        step = burn_in;
+        step_ms.push(done.step_ms_median);
+    }
+    let first = (step - burn_in) / steps_per_frame;
+    let mut done = PathRendered {
+        frames: first..first,
+        interrupted: false,
+        burn_in_steps: burn_in,
+        iteration_ms_median: 0.0,
+        first_shot_ms: renderer.first_shot.as_ref().map_or(0.0, |f| f.ms),
+        total_ms: 0.0,
+    };
+    for f in first..frames.len() as u32 {
+        renderer.views[0].camera = Camera { width: options.width, height: options.height, ..frames[f as usize] };
+        renderer.clear_images();
+        renderer.image_start = step;
+        let end = step + steps_per_frame;
+        let stats = renderer.advance(step, end, hooks)?;
+        step_ms.push(stats.step_ms_median);
+        if stats.steps < end {
+            done.interrupted = true;
+            break;
+        }
+        step = end;
+        let image = renderer.read_image()?;
+        hooks.frame(f, &image, step, renderer.read_state()?)?;
+        done.frames.end = f + 1;
+        if hooks.stop_requested() && done.frames.end < frames.len() as u32 {
+            done.interrupted = true;
+            break;
+        }
+    }
+    ctx.check()?;
+    step_ms.sort_by(f64::total_cmp);
+    done.iteration_ms_median = step_ms.get(step_ms.len() / 2).copied().unwrap_or(0.0);
+    done.total_ms = milliseconds(renderer.start);
+    Ok(done)
+}
+
+/// What belongs to one view of a render: its camera, its camera item buffer and its image
+/// estimate (the running image sum). Everything else a step computes (the iteration state,
+/// the step's bundle and what each patch sends the image, the lights' windows of a pass) is
+/// view-independent and shared by every view, so a view costs its image stages only.
+pub struct ViewImage {
+    pub name: String,
+    /// The camera, at the image's size (`Camera::width`, `Camera::height`).
+    pub camera: Camera,
+    item_buffer: CameraItemBuffer,
+    estimate: ImageEstimate,
+}
+
+/// One render, set up: the scene on the GPU, its first-shot table, the iteration state and
+/// its views (each a camera item buffer and an image sum), owned together. `step_stages` is
+/// the one description of a step, which `run` (the CLI and the tests), the benchmark
+/// harness and its stage profiler all use.
 pub struct Renderer<'a> {
     ctx: &'a Context,
     scene: &'a Scene,
     options: RenderOptions,
     buffers: SceneBuffers,
-    camera: CameraItemBuffer,
     direct: DirectLights,
-    estimate: ImageEstimate,
+    /// One per camera (`RenderOptions::views`), never empty.
+    views: Vec<ViewImage>,
     /// The bundle stages; `None` for a first-shot-only image (`iterations == 0`).
     iteration: Option<Iteration>,
     /// Steps before the first one averaged into the image.
     burn_in: u32,
+    /// The step whose estimate is the image's first: the burn-in, or a frame's first step
+    /// (`render_path`), which counts its direct-light passes from there.
+    image_start: u32,
     /// Whether this pass estimates the direct light (`image_stages`).
     direct_due: bool,
     /// Whether this pass renders the area lights' windows at new points.
@@ -374,7 +540,6 @@ impl<'a> Renderer<'a> {
         let device = &ctx.device;
         let upload = Instant::now();
         let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
-        let camera = CameraItemBuffer::new(device, options.width, options.height);
         let upload_ms = milliseconds(upload);
         let first_shot = if !options.first_shot || patches.samples.is_empty() {
             None
@@ -392,9 +557,18 @@ impl<'a> Renderer<'a> {
                 .unwrap_or_else(|| fragment_bound(patches, buffers.radius, options.bundle_resolution));
             Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
         };
-        let estimate = ImageEstimate::new(device, &buffers, &camera, &direct, iteration.as_ref().map(|i| &i.gather));
         let gathers = iteration.is_some();
-        estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), gathers);
+        let views = options
+            .views(scene)
+            .into_iter()
+            .map(|NamedCamera { name, camera }| {
+                let item_buffer = CameraItemBuffer::new(device, camera.width, camera.height);
+                let gather = iteration.as_ref().map(|i| &i.gather);
+                let estimate = ImageEstimate::new(device, &buffers, &item_buffer, &direct, gather);
+                estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), gathers);
+                ViewImage { name, camera, item_buffer, estimate }
+            })
+            .collect();
         let burn_in = burn_in_steps(scene, options);
         Ok(Renderer {
             ctx,
@@ -402,11 +576,11 @@ impl<'a> Renderer<'a> {
             options: options.clone(),
             near: buffers.radius * 1e-5,
             buffers,
-            camera,
             direct,
-            estimate,
+            views,
             iteration,
             burn_in,
+            image_start: burn_in,
             direct_due: true,
             windows_due: true,
             first_shot,
@@ -455,13 +629,13 @@ impl<'a> Renderer<'a> {
     /// generator.
     pub fn write_step(&mut self, k: u32) {
         let queue = &self.ctx.queue;
-        let image_step = k >= self.burn_in;
+        let image_step = k >= self.image_start;
         let mut rng =
             self.iteration().write_bundle(queue, self.options.seed, k as u64, image_step, &self.bundle_scene());
         if image_step {
             let jitter = [rng.uniform() as f32, rng.uniform() as f32];
             self.write_camera(jitter);
-            let i = k - self.burn_in;
+            let i = k - self.image_start;
             self.direct_due = direct_light_due(i, &self.options);
             if self.direct_due {
                 let pass = direct_light_estimates(i, &self.options) as u64;
@@ -470,45 +644,71 @@ impl<'a> Renderer<'a> {
         }
     }
 
+    /// Every view's camera uniform, with the sample at `jitter` inside each pixel: the views
+    /// share the step's sample, so each view's image is that of a run with its camera alone.
     fn write_camera(&self, jitter: [f32; 2]) {
-        let (o, near) = (&self.options, self.near);
-        let cam = gpu_camera(&self.scene.camera, o.width, o.height, near, jitter);
-        self.ctx.queue.write_buffer(&self.camera.camera, 0, bytemuck::bytes_of(&cam));
+        for view in &self.views {
+            let c = &view.camera;
+            let cam = gpu_camera(c, c.width, c.height, self.near, jitter);
+            self.ctx.queue.write_buffer(&view.item_buffer.camera, 0, bytemuck::bytes_of(&cam));
+        }
+    }
+
+    /// The views, in order.
+    pub fn views(&self) -> &[ViewImage] {
+        &self.views
+    }
+
+    /// Zeroes every view's image sum (a frame of a walkthrough starts its own average).
+    fn clear_images(&self) {
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        for view in &self.views {
+            view.estimate.clear(&mut encoder);
+        }
+        self.ctx.queue.submit([encoder.finish()]);
     }
 
     /// The stages of step `k`, in order (its uniforms written by `write_step`): the bundle
     /// stages of the iteration, then, past the burn-in, the image stages.
     pub fn step_stages(&self, k: u32) -> Vec<Stage<'_>> {
         let mut stages = self.iteration().stages(&self.buffers);
-        if k >= self.burn_in {
+        if k >= self.image_start {
             stages.extend(self.image_stages(self.direct_due, true));
         }
         stages
     }
 
-    /// The stages that add one estimate of every pixel to the image sum: the camera item
-    /// buffer, then, if `direct`, the area lights' windows at this pass's points and the
-    /// estimate of Le + D, then, if `gather`, the estimate of G through this step's bundle.
+    /// The stages that add one estimate of every pixel of every view to its image sum: per
+    /// view the camera item buffer, then, if `direct`, the estimate of Le + D, then, if
+    /// `gather`, the estimate of G through this step's bundle. The area lights' windows at
+    /// this pass's points, which every view's Le + D reads, are rendered once, after the
+    /// first view's item buffer.
     fn image_stages(&self, direct: bool, gather: bool) -> Vec<Stage<'_>> {
-        let (camera, estimate, buffers, lights) = (&self.camera, &self.estimate, &self.buffers, &self.direct);
+        let (buffers, lights) = (&self.buffers, &self.direct);
         let windows_due = direct && self.windows_due;
-        let mut stages: Vec<Stage<'_>> = vec![(
-            "camera",
-            Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
-        )];
-        if direct {
+        let mut stages: Vec<Stage<'_>> = Vec::new();
+        for (v, view) in self.views.iter().enumerate() {
+            let (camera, estimate) = (&view.item_buffer, &view.estimate);
             stages.push((
-                "light_windows",
-                Box::new(move |e: &mut wgpu::CommandEncoder| {
-                    if windows_due {
-                        lights.record_pass(e, buffers)
-                    }
-                }),
+                "camera",
+                Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
             ));
-            stages.push(("direct", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_direct(e))));
-        }
-        if gather {
-            stages.push(("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e))));
+            if direct && v == 0 {
+                stages.push((
+                    "light_windows",
+                    Box::new(move |e: &mut wgpu::CommandEncoder| {
+                        if windows_due {
+                            lights.record_pass(e, buffers)
+                        }
+                    }),
+                ));
+            }
+            if direct {
+                stages.push(("direct", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_direct(e))));
+            }
+            if gather {
+                stages.push(("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e))));
+            }
         }
         stages
     }
@@ -559,10 +759,21 @@ impl<'a> Renderer<'a> {
         crate::gpu::buffers::read_back(&self.ctx.device, &self.ctx.queue, b, b.size())
     }
 
-    /// The image so far: the mean of the estimates.
+    /// The image of the first view so far: the mean of the estimates.
     pub fn read_image(&self) -> Result<Image> {
-        let pixels = self.estimate.read_mean(&self.ctx.device, &self.ctx.queue)?;
-        Ok(Image::new(self.options.width, self.options.height, pixels))
+        self.read_view_image(0)
+    }
+
+    /// The image of view `v` so far.
+    pub fn read_view_image(&self, v: usize) -> Result<Image> {
+        let view = &self.views[v];
+        let pixels = view.estimate.read_mean(&self.ctx.device, &self.ctx.queue)?;
+        Ok(Image::new(view.camera.width, view.camera.height, pixels))
+    }
+
+    /// The images of every view so far.
+    fn read_images(&self) -> Result<Vec<Image>> {
+        (0..self.views.len()).map(|v| self.read_view_image(v)).collect()
     }
 
     /// Runs the render to its end (or until the hooks stop it) and reads the image back.
@@ -586,16 +797,22 @@ impl<'a> Renderer<'a> {
             0 => iteration_stats.steps.saturating_sub(self.burn_in),
             passes => passes,
         };
-        let image_sum = self.estimate.read_sum(&self.ctx.device, &self.ctx.queue)?;
-        let pixels = crate::stages::image_estimate::image_of_sums(&image_sum)?;
-        let image = Image::new(self.options.width, self.options.height, pixels);
+        let mut images = Vec::with_capacity(self.views.len());
+        for view in &self.views {
+            let image_sum = view.estimate.read_sum(&self.ctx.device, &self.ctx.queue)?;
+            let pixels = crate::stages::image_estimate::image_of_sums(&image_sum)?;
+            let image = Image::new(view.camera.width, view.camera.height, pixels);
+            images.push(RenderedView { name: view.name.clone(), image, image_sum });
+        }
+        let first = images.remove(0);
         let image_ms = milliseconds(image_start);
         self.ctx.check()?;
         let (o, fs) = (&self.options, self.first_shot.as_ref());
         Ok(Rendered {
             interrupted: iteration_stats.interrupted || direct.interrupted,
-            image,
-            image_sum,
+            image: first.image,
+            image_sum: first.image_sum,
+            other_views: images,
             stats: RenderStats {
                 adapter: self.ctx.summary.clone(),
                 scene: self.scene.source.display().to_string(),
@@ -645,7 +862,9 @@ impl<'a> Renderer<'a> {
             order.swap(i, pick);
         }
         // No gather adds its share of the emitting shapes' light: D takes all of it.
-        self.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, self.direct.count(), false);
+        for view in &self.views {
+            view.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, self.direct.count(), false);
+        }
         let mut done = DirectImage::default();
         for k in 0..passes {
             // Generators of their own, apart from the steps' (seed, k) streams.
@@ -675,28 +894,37 @@ impl<'a> Renderer<'a> {
         Ok(done)
     }
 
-    fn checkpoint(&self, step: u32) -> Result<(Checkpoint, Image)> {
+    /// The state after `step` steps, with the image sums of every view one after another.
+    fn checkpoint(&self, step: u32) -> Result<(Checkpoint, Vec<Image>)> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
-        let image_sum = &self.estimate.image_sum;
+        let mut image_sum = Vec::new();
+        for view in &self.views {
+            let sum = &view.estimate.image_sum;
+            image_sum.extend(crate::gpu::buffers::read_back::<u8>(device, queue, sum, sum.size())?);
+        }
         let checkpoint = Checkpoint {
             fingerprint: fingerprint(self.scene, &self.options),
             step,
             state: self.read_state()?,
-            image_sum: crate::gpu::buffers::read_back(device, queue, image_sum, image_sum.size())?,
+            image_sum,
         };
-        Ok((checkpoint, self.read_image()?))
+        Ok((checkpoint, self.read_images()?))
     }
 
-    /// Puts a checkpoint's state and image sum on the GPU; returns its step. Its
+    /// Puts a checkpoint's state and image sums on the GPU; returns its step. Its
     /// fingerprint was checked where it was read (`main.rs`); the sizes guard the copies.
     fn restore(&self, c: &Checkpoint) -> Result<u32> {
-        if c.state.len() as u64 != self.buffers.state.size()
-            || c.image_sum.len() as u64 != self.estimate.image_sum.size()
-        {
+        let sums: u64 = self.views.iter().map(|v| v.estimate.image_sum.size()).sum();
+        if c.state.len() as u64 != self.buffers.state.size() || c.image_sum.len() as u64 != sums {
             return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
         }
         self.ctx.queue.write_buffer(&self.buffers.state, 0, &c.state);
-        self.ctx.queue.write_buffer(&self.estimate.image_sum, 0, &c.image_sum);
+        let mut at = 0;
+        for view in &self.views {
+            let size = view.estimate.image_sum.size() as usize;
+            self.ctx.queue.write_buffer(&view.estimate.image_sum, 0, &c.image_sum[at..at + size]);
+            at += size;
+        }
         Ok(c.step)
     }
 
@@ -705,13 +933,20 @@ impl<'a> Renderer<'a> {
     /// image sum are kept at each batch's start, so a batch in which a line ran out of
     /// fragment room is redone, exactly, with a larger list.
     fn iterate(&mut self, resume: Option<&Checkpoint>, hooks: &mut dyn Hooks) -> Result<IterationStats> {
-        let (ctx, options) = (self.ctx, self.options.clone());
-        let device = &ctx.device;
-        let started = Instant::now();
-        let mut step = match resume {
+        let step = match resume {
             Some(c) => self.restore(c)?,
             None => 0,
         };
+        let total = self.options.iterations.saturating_add(self.burn_in);
+        self.advance(step, total, hooks)
+    }
+
+    /// Steps `step..total` (fewer if `time_limit` or the hooks end them), those from
+    /// `image_start` on each adding one image estimate, in batches (`iterate`).
+    fn advance(&mut self, mut step: u32, total: u32, hooks: &mut dyn Hooks) -> Result<IterationStats> {
+        let (ctx, options) = (self.ctx, self.options.clone());
+        let device = &ctx.device;
+        let started = Instant::now();
         let backup = |b: &wgpu::Buffer, label: &str| {
             let copy = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -721,10 +956,8 @@ impl<'a> Renderer<'a> {
             });
             (b.clone(), copy)
         };
-        let kept = [
-            backup(&self.buffers.state, "firstshot.render.state_backup"),
-            backup(&self.estimate.image_sum, "firstshot.render.image_backup"),
-        ];
+        let mut kept = vec![backup(&self.buffers.state, "firstshot.render.state_backup")];
+        kept.extend(self.views.iter().map(|v| backup(&v.estimate.image_sum, "firstshot.render.image_backup")));
         let copy_all = |to_backup: bool| {
             let mut encoder = device.create_command_encoder(&Default::default());
             for (live, copy) in &kept {
@@ -735,7 +968,6 @@ impl<'a> Renderer<'a> {
         };
         let mut batch_ms = Vec::new();
         let mut interrupted = false;
-        let total = options.iterations.saturating_add(self.burn_in);
         while step < total && !interrupted {
             // Past the time limit (even within the burn-in: `run` then makes a direct image).
             if options.time_limit.is_some_and(|limit| self.start.elapsed() >= limit) {
@@ -750,7 +982,7 @@ impl<'a> Renderer<'a> {
                 batch += 1;
                 // A stop waits for the burn-in and one image step, so that there is an image
                 // to write (and a checkpoint to resume from).
-                if hooks.stop_requested() && step + batch > self.burn_in {
+                if hooks.stop_requested() && step + batch > self.image_start {
                     interrupted = true;
                     break;
                 }
@@ -764,7 +996,9 @@ impl<'a> Renderer<'a> {
                 let (capacity, resolution) = self.bundle_size();
                 let capacity = (capacity as u64).saturating_mul(2);
                 let iteration = Iteration::new(ctx, &self.buffers, resolution, capacity)?;
-                self.estimate.rebind_gather(device, &iteration.gather);
+                for view in &mut self.views {
+                    view.estimate.rebind_gather(device, &iteration.gather);
+                }
                 self.iteration = Some(iteration);
                 interrupted = false;
                 continue;
@@ -772,15 +1006,15 @@ impl<'a> Renderer<'a> {
             batch_ms.push(batch_start.elapsed().as_secs_f64() * 1e3 / batch as f64);
             step += batch;
             hooks.progress(step, total);
-            if step > self.burn_in && hooks.checkpoint_due() {
-                let (checkpoint, image) = self.checkpoint(step)?;
-                hooks.checkpoint(checkpoint, &image)?;
+            if step > self.image_start && hooks.checkpoint_due() {
+                let (checkpoint, images) = self.checkpoint(step)?;
+                hooks.checkpoint(checkpoint, &images)?;
             }
         }
         ctx.wait()?;
-        if hooks.wants_final_checkpoint() && step > self.burn_in {
-            let (checkpoint, image) = self.checkpoint(step)?;
-            hooks.checkpoint(checkpoint, &image)?;
+        if hooks.wants_final_checkpoint() && step > self.image_start {
+            let (checkpoint, images) = self.checkpoint(step)?;
+            hooks.checkpoint(checkpoint, &images)?;
         }
         batch_ms.sort_by(f64::total_cmp);
         Ok(IterationStats {

@@ -4,3 +4,4 @@
 pub mod io;
 pub mod outputs;
 pub mod signals;
+pub mod walkthrough;

@@ -42,6 +42,21 @@ pub fn exr_path(out: Option<&Path>, scene: &Path) -> Result<PathBuf, Error> {
     }
 }
 
+/// The EXR of one of several images of a run, beside `exr` and named after it: `OUT.exr`
+/// and the camera "door" (`--all-cameras`) give `OUT_door.exr`, frame 7 of a path
+/// (`--path`) `OUT_0007.exr`. `what` names the part in a refusal ("camera", "frame").
+pub fn exr_beside(exr: &Path, suffix: &str, what: &str) -> Result<PathBuf, Error> {
+    let fits = !suffix.is_empty() && suffix.chars().all(|c| c.is_alphanumeric() || matches!(c, '-' | '_' | '.'));
+    if !fits {
+        return Err(refuse(format!(
+            "{what} \"{suffix}\" cannot be part of a file name ({}_{suffix}.exr); give it a name of letters, digits, '-', '_' and '.'",
+            exr.with_extension("").display()
+        )));
+    }
+    let stem = exr.file_stem().unwrap_or_default().to_string_lossy();
+    Ok(exr.with_file_name(format!("{stem}_{suffix}.exr")))
+}
+
 /// Where `--stats` goes: a file replaced through a temporary file and a rename, or, for
 /// an existing device or pipe (`/dev/null`, a FIFO with a reader) or one of this process's
 /// own descriptors (`/dev/stdout`), the stream itself, opened now and written in place.
@@ -50,11 +65,19 @@ pub enum StatsTarget {
     Stream { path: PathBuf, file: File },
 }
 
+/// One image of a render: the EXR and the PNG beside it.
+#[derive(Debug, Clone)]
+pub struct ImagePaths {
+    pub exr: PathBuf,
+    pub png: PathBuf,
+}
+
 /// Every output of a render, checked: the paths to write (a symbolic link to a file is
 /// written through, so the link stays a link), and the folders that must be made.
 pub struct OutputPlan {
-    pub exr: PathBuf,
-    pub png: PathBuf,
+    /// Every image of the run (one per camera with `--all-cameras`, one per frame with
+    /// `--path`), in order; never empty.
+    pub images: Vec<ImagePaths>,
     pub checkpoint: PathBuf,
     /// A shard's part file (`merge::Part`), beside the EXR.
     pub part: Option<PathBuf>,
@@ -264,7 +287,18 @@ impl OutputPlan {
     /// it, and with `part` a shard's part file) and `stats`, from the scene at `scene`.
     /// Writes nothing and makes no folder.
     pub fn new(exr: &Path, stats: Option<&Path>, scene: &Path, part: bool) -> Result<OutputPlan, Error> {
-        let png = exr.with_extension("png");
+        Self::with_images(exr, &[exr.to_path_buf()], stats, scene, part)
+    }
+
+    /// As `new`, for a run that writes the images `exrs` (each with its PNG beside it), and
+    /// the checkpoint and part beside `exr` (which need not be one of them).
+    pub fn with_images(
+        exr: &Path,
+        exrs: &[PathBuf],
+        stats: Option<&Path>,
+        scene: &Path,
+        part: bool,
+    ) -> Result<OutputPlan, Error> {
         let checkpoint = exr.with_extension("checkpoint");
         let part_path = exr.with_extension("part");
         let part = match part {
@@ -275,15 +309,17 @@ impl OutputPlan {
             false => None,
         };
         let out = |p: &Path| format!("--out {}", p.display());
-        let written = [
-            (image_output(exr, &out(exr))?, exr, "the image"),
-            (image_output(&png, &format!("{} (the PNG beside the EXR)", out(&png)))?, png.as_path(), "the PNG"),
-            (
-                image_output(&checkpoint, &format!("{} (the checkpoint beside the EXR)", out(&checkpoint)))?,
-                checkpoint.as_path(),
-                "the checkpoint",
-            ),
-        ];
+        let pngs: Vec<PathBuf> = exrs.iter().map(|e| e.with_extension("png")).collect();
+        let mut written = Vec::with_capacity(2 * exrs.len() + 1);
+        for (exr, png) in exrs.iter().zip(&pngs) {
+            written.push((image_output(exr, &out(exr))?, exr.as_path(), "the image"));
+            written.push((image_output(png, &format!("{} (the PNG beside the EXR)", out(png)))?, png, "the PNG"));
+        }
+        written.push((
+            image_output(&checkpoint, &format!("{} (the checkpoint beside the EXR)", out(&checkpoint)))?,
+            checkpoint.as_path(),
+            "the checkpoint",
+        ));
         let stats_target = match stats {
             None => None,
             Some(path) if path.as_os_str().is_empty() => {
@@ -329,8 +365,10 @@ impl OutputPlan {
         for folder in &folders {
             check_folder(folder)?;
         }
-        let [(exr, ..), (png, ..), (checkpoint, ..)] = written;
-        Ok(OutputPlan { exr, png, checkpoint, part, stats: stats_target, folders, made: Vec::new() })
+        let checkpoint = written.pop().map(|w| w.0).unwrap_or_default();
+        let images: Vec<ImagePaths> =
+            written.chunks_exact(2).map(|w| ImagePaths { exr: w[0].0.clone(), png: w[1].0.clone() }).collect();
+        Ok(OutputPlan { images, checkpoint, part, stats: stats_target, folders, made: Vec::new() })
     }
 
     /// Makes the missing folders and writes (and removes) a temporary file in each, so that

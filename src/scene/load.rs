@@ -103,7 +103,7 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
 }
 
 /// Parses the TOML text, keeping the toml crate's line and column in the key.
-fn parse_toml(text: &str, source: &Path) -> Result<Table> {
+pub(super) fn parse_toml(text: &str, source: &Path) -> Result<Table> {
     text.parse::<Table>().map_err(|e| {
         let shown = e.to_string();
         let message = e.message().trim();
@@ -479,46 +479,46 @@ fn light(t: &Tbl) -> Result<Light> {
 }
 
 /// The file being read, for errors.
-struct Context<'a> {
-    file: &'a Path,
+pub(super) struct Context<'a> {
+    pub(super) file: &'a Path,
 }
 
 impl Context<'_> {
-    fn err(&self, key: impl Into<String>, message: impl Into<String>) -> Error {
+    pub(super) fn err(&self, key: impl Into<String>, message: impl Into<String>) -> Error {
         Error::scene(self.file, key, message)
     }
 }
 
 /// A TOML table and the key path that leads to it ("" for the root).
-struct Tbl<'a> {
-    cx: &'a Context<'a>,
-    key: String,
-    table: &'a Table,
+pub(super) struct Tbl<'a> {
+    pub(super) cx: &'a Context<'a>,
+    pub(super) key: String,
+    pub(super) table: &'a Table,
 }
 
 /// A TOML value and the key path that leads to it.
-struct Item<'a> {
-    cx: &'a Context<'a>,
-    key: String,
-    value: &'a Value,
+pub(super) struct Item<'a> {
+    pub(super) cx: &'a Context<'a>,
+    pub(super) key: String,
+    pub(super) value: &'a Value,
 }
 
 impl<'a> Tbl<'a> {
-    fn child(&self, name: &str) -> String {
+    pub(super) fn child(&self, name: &str) -> String {
         let name = quote_key(name);
         if self.key.is_empty() { name } else { format!("{}.{name}", self.key) }
     }
 
-    fn get(&self, name: &str) -> Option<Item<'a>> {
+    pub(super) fn get(&self, name: &str) -> Option<Item<'a>> {
         self.table.get(name).map(|value| Item { cx: self.cx, key: self.child(name), value })
     }
 
-    fn req(&self, name: &str, expected: &str) -> Result<Item<'a>> {
+    pub(super) fn req(&self, name: &str, expected: &str) -> Result<Item<'a>> {
         self.get(name).ok_or_else(|| self.cx.err(self.child(name), format!("required: {expected}")))
     }
 
     /// Refuses any key not in `allowed`, naming the allowed ones.
-    fn only(&self, allowed: &[&str]) -> Result<()> {
+    pub(super) fn only(&self, allowed: &[&str]) -> Result<()> {
         match self.table.keys().find(|k| !allowed.contains(&k.as_str())) {
             Some(unknown) => {
                 Err(self.cx.err(self.child(unknown), format!("unknown key; allowed here: {}", allowed.join(", "))))
@@ -529,19 +529,19 @@ impl<'a> Tbl<'a> {
 }
 
 impl<'a> Item<'a> {
-    fn err(&self, message: impl Into<String>) -> Error {
+    pub(super) fn err(&self, message: impl Into<String>) -> Error {
         self.cx.err(&self.key, message)
     }
 
-    fn expected(&self, what: &str) -> Error {
+    pub(super) fn expected(&self, what: &str) -> Error {
         self.err(format!("expected {what}, got {}", describe(self.value)))
     }
 
-    fn index(&self, i: usize, value: &'a Value) -> Item<'a> {
+    pub(super) fn index(&self, i: usize, value: &'a Value) -> Item<'a> {
         Item { cx: self.cx, key: format!("{}[{i}]", self.key), value }
     }
 
-    fn table(&self) -> Result<Tbl<'a>> {
+    pub(super) fn table(&self) -> Result<Tbl<'a>> {
         match self.value {
             Value::Table(table) => Ok(Tbl { cx: self.cx, key: self.key.clone(), table }),
             _ => Err(self.expected("a table")),
@@ -549,7 +549,7 @@ impl<'a> Item<'a> {
     }
 
     /// An array of tables (`[[shapes]]`), each keyed `key[i]`.
-    fn tables(&self, what: &str) -> Result<Vec<Tbl<'a>>> {
+    pub(super) fn tables(&self, what: &str) -> Result<Vec<Tbl<'a>>> {
         let Value::Array(items) = self.value else {
             return Err(self.expected(&format!("an array of {what}")));
         };
@@ -557,7 +557,7 @@ impl<'a> Item<'a> {
     }
 
     /// An array of exactly N values.
-    fn fixed<const N: usize>(&self, what: &str) -> Result<[Item<'a>; N]> {
+    pub(super) fn fixed<const N: usize>(&self, what: &str) -> Result<[Item<'a>; N]> {
         let wrong = || self.expected(what);
         let Value::Array(items) = self.value else {
             return Err(wrong());
@@ -569,15 +569,15 @@ impl<'a> Item<'a> {
         items.try_into().map_err(|_| wrong())
     }
 
-    fn string(&self) -> Result<&'a str> {
+    pub(super) fn string(&self) -> Result<&'a str> {
         self.value.as_str().ok_or_else(|| self.expected("a string"))
     }
 
-    fn boolean(&self) -> Result<bool> {
+    pub(super) fn boolean(&self) -> Result<bool> {
         self.value.as_bool().ok_or_else(|| self.expected("true or false"))
     }
 
-    fn integer(&self, min: i64, max: i64) -> Result<i64> {
+    pub(super) fn integer(&self, min: i64, max: i64) -> Result<i64> {
         let Value::Integer(i) = *self.value else {
             return Err(self.expected("an integer"));
         };
@@ -588,7 +588,7 @@ impl<'a> Item<'a> {
     }
 
     /// A finite number within the f32 range (integers are numbers too).
-    fn number(&self) -> Result<f64> {
+    pub(super) fn number(&self) -> Result<f64> {
         let x = match *self.value {
             Value::Integer(i) => i as f64,
             Value::Float(x) => x,
@@ -606,18 +606,18 @@ impl<'a> Item<'a> {
         Ok(x)
     }
 
-    fn positive(&self) -> Result<f64> {
+    pub(super) fn positive(&self) -> Result<f64> {
         let x = self.number()?;
         if x > 0.0 { Ok(x) } else { Err(self.err(format!("must be > 0, got {x}"))) }
     }
 
-    fn vec3(&self) -> Result<DVec3> {
+    pub(super) fn vec3(&self) -> Result<DVec3> {
         let [x, y, z] = self.fixed::<3>("3 numbers [x, y, z]")?;
         Ok(DVec3::new(x.number()?, y.number()?, z.number()?))
     }
 
     /// A colour: 3 numbers, each >= 0.
-    fn rgb(&self) -> Result<Rgb> {
+    pub(super) fn rgb(&self) -> Result<Rgb> {
         let [r, g, b] = self.fixed::<3>("3 numbers [r, g, b]")?;
         let rgb = [r.number()?, g.number()?, b.number()?];
         if let Some(c) = rgb.iter().position(|&x| x < 0.0) {
@@ -631,7 +631,7 @@ impl<'a> Item<'a> {
     }
 
     /// An array of exactly `n` points, each keyed `key[i]`.
-    fn points(&self, n: usize) -> Result<Vec<DVec3>> {
+    pub(super) fn points(&self, n: usize) -> Result<Vec<DVec3>> {
         let what = format!("{n} points [[x, y, z], ...]");
         let Value::Array(items) = self.value else {
             return Err(self.expected(&what));
@@ -663,7 +663,7 @@ fn describe(value: &Value) -> String {
     }
 }
 
-fn show(v: DVec3) -> String {
+pub(super) fn show(v: DVec3) -> String {
     format!("[{}, {}, {}]", v.x, v.y, v.z)
 }
 

@@ -5,6 +5,7 @@
 //! than the 1e-6 the contract asks; it becomes f32 only when it is uploaded.
 
 pub mod brdf;
+pub mod camera_path;
 pub mod contact;
 pub mod load;
 pub mod shapes;
