@@ -322,7 +322,8 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
                 "the image {width}x{height} exceeds the device's largest texture side {max_dim}; use a smaller --width/--height"
             )));
         }
-        fit("the image", width as u64 * height as u64 * 16, "use a smaller --width/--height")?;
+        let half = width as u64 * height as u64 * crate::stages::image_estimate::IMAGE_SUM_BYTES_PER_PIXEL;
+        fit("the image", half, "use a smaller --width/--height")?;
     }
     // The stages check these too, but only once the first shot (or the first shot and the
     // bundle buffers) exist: here they are refused before any GPU work, and the bundle's
@@ -863,7 +864,13 @@ impl<'a> Renderer<'a> {
         }
         // No gather adds its share of the emitting shapes' light: D takes all of it.
         for view in &self.views {
-            view.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, self.direct.count(), false);
+            view.estimate.set_params(
+                queue,
+                self.scene.environment,
+                self.buffers.patch_count,
+                self.direct.count(),
+                false,
+            );
         }
         let mut done = DirectImage::default();
         for k in 0..passes {
@@ -899,8 +906,9 @@ impl<'a> Renderer<'a> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let mut image_sum = Vec::new();
         for view in &self.views {
-            let sum = &view.estimate.image_sum;
-            image_sum.extend(crate::gpu::buffers::read_back::<u8>(device, queue, sum, sum.size())?);
+            for sum in &view.estimate.image_sums {
+                image_sum.extend(crate::gpu::buffers::read_back::<u8>(device, queue, sum, sum.size())?);
+            }
         }
         let checkpoint = Checkpoint {
             fingerprint: fingerprint(self.scene, &self.options),
@@ -914,15 +922,15 @@ impl<'a> Renderer<'a> {
     /// Puts a checkpoint's state and image sums on the GPU; returns its step. Its
     /// fingerprint was checked where it was read (`main.rs`); the sizes guard the copies.
     fn restore(&self, c: &Checkpoint) -> Result<u32> {
-        let sums: u64 = self.views.iter().map(|v| v.estimate.image_sum.size()).sum();
+        let sums: u64 = self.views.iter().flat_map(|v| &v.estimate.image_sums).map(|b| b.size()).sum();
         if c.state.len() as u64 != self.buffers.state.size() || c.image_sum.len() as u64 != sums {
             return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
         }
         self.ctx.queue.write_buffer(&self.buffers.state, 0, &c.state);
         let mut at = 0;
-        for view in &self.views {
-            let size = view.estimate.image_sum.size() as usize;
-            self.ctx.queue.write_buffer(&view.estimate.image_sum, 0, &c.image_sum[at..at + size]);
+        for sum in self.views.iter().flat_map(|v| &v.estimate.image_sums) {
+            let size = sum.size() as usize;
+            self.ctx.queue.write_buffer(sum, 0, &c.image_sum[at..at + size]);
             at += size;
         }
         Ok(c.step)
@@ -957,7 +965,9 @@ impl<'a> Renderer<'a> {
             (b.clone(), copy)
         };
         let mut kept = vec![backup(&self.buffers.state, "firstshot.render.state_backup")];
-        kept.extend(self.views.iter().map(|v| backup(&v.estimate.image_sum, "firstshot.render.image_backup")));
+        kept.extend(
+            self.views.iter().flat_map(|v| &v.estimate.image_sums).map(|b| backup(b, "firstshot.render.image_backup")),
+        );
         let copy_all = |to_backup: bool| {
             let mut encoder = device.create_command_encoder(&Default::default());
             for (live, copy) in &kept {

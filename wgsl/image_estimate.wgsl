@@ -23,6 +23,8 @@
 // `gather`, every step); the image is the sum of their means (the direct light converges
 // in far fewer passes than the indirect, so it is not paid for every step).
 //
+// Each half is a buffer of its own, bound as image_sum in the group 0 that the host binds
+// for the entry point (so one binding holds 16 bytes a pixel, not 32).
 // Compute, one invocation per pixel: the only writer of its entries of image_sum. Group 1:
 // the direct lights and their window atlases; group 2: this step's bundle, sorted by
 // bundle_transfer.
@@ -409,7 +411,7 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // G: the indirect light gathered through this step's bundle, added to the second half of
-// the image sum.
+// the image sum (bound here as image_sum).
 @compute @workgroup_size(8, 8)
 fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
@@ -427,6 +429,6 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         let incoming = gathered(at.j, at.x, toward, s);
         radiance = 2.0 * PI * incoming * abs(dot(at.n, d)) * brdf(m, at.n, toward, at.w_out);
     }
-    let pixel = size.x * size.y + gid.y * size.x + gid.x;
+    let pixel = gid.y * size.x + gid.x;
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }

@@ -25,8 +25,10 @@ pub const SPEC: KernelSpec = KernelSpec {
             uint_texture("item_buffer"),
             read::<GpuPatch>("patches"),
             read::<GpuMaterial>("materials"),
-            // Two halves (Le + D, G) of rgb sum, w count per pixel; one pixel per
-            // invocation: no race.
+            // One half of the image sum, rgb sum and w count per pixel: Le + D for the
+            // `direct` entry point, G for `gather` (each half its own buffer, bound in its
+            // own group 0, so that each needs only 16 bytes a pixel of one binding). One
+            // pixel per invocation: no race.
             read_write::<[f32; 4]>("image_sum"),
         ],
         // The direct light (`direct_light::DirectLights`).
@@ -51,17 +53,21 @@ pub const SPEC: KernelSpec = KernelSpec {
     ],
 };
 
+/// The bytes per pixel of each half of the image sum (vec4<f32>: rgb sum, w count).
+pub const IMAGE_SUM_BYTES_PER_PIXEL: u64 = 16;
+
 /// Pipelines, parameters and the image sum (two halves of vec4<f32> per pixel: rgb sum,
-/// w count; Le + D, then G).
+/// w count; Le + D in `image_sums[0]`, G in `image_sums[1]`).
 pub struct ImageEstimate {
     built: Kernel,
     direct_pipeline: wgpu::ComputePipeline,
     gather_pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
+    /// Group 0 for `direct` (binding the first half) and for `gather` (the second).
+    sum_groups: [wgpu::BindGroup; 2],
     direct_group: wgpu::BindGroup,
     gather_group: wgpu::BindGroup,
     pub params: wgpu::Buffer,
-    pub image_sum: wgpu::Buffer,
+    pub image_sums: [wgpu::Buffer; 2],
     width: u32,
     height: u32,
 }
@@ -84,24 +90,23 @@ impl ImageEstimate {
             &<GpuEstimateParams as bytemuck::Zeroable>::zeroed(),
         );
         let pixels = camera.width as u64 * camera.height as u64;
-        let image_sum = buffers::storage_zeroed(
-            device,
-            "firstshot.image_estimate.image_sum",
-            2 * pixels * 16,
-            wgpu::BufferUsages::COPY_SRC,
-        );
-        let bind_group = built.bind_group(
-            device,
-            0,
-            &[
-                ("camera", (&camera.camera).into()),
-                ("params", (&params).into()),
-                ("item_buffer", (&camera.ids_view).into()),
-                ("patches", (&scene.patches).into()),
-                ("materials", (&scene.materials).into()),
-                ("image_sum", (&image_sum).into()),
-            ],
-        );
+        let image_sums = ["firstshot.image_estimate.direct_sum", "firstshot.image_estimate.gather_sum"].map(|label| {
+            buffers::storage_zeroed(device, label, pixels * IMAGE_SUM_BYTES_PER_PIXEL, wgpu::BufferUsages::COPY_SRC)
+        });
+        let sum_groups = [0, 1].map(|half| {
+            built.bind_group(
+                device,
+                0,
+                &[
+                    ("camera", (&camera.camera).into()),
+                    ("params", (&params).into()),
+                    ("item_buffer", (&camera.ids_view).into()),
+                    ("patches", (&scene.patches).into()),
+                    ("materials", (&scene.materials).into()),
+                    ("image_sum", (&image_sums[half]).into()),
+                ],
+            )
+        });
         let direct_group = built.bind_group(
             device,
             1,
@@ -117,11 +122,11 @@ impl ImageEstimate {
             built,
             direct_pipeline,
             gather_pipeline,
-            bind_group,
+            sum_groups,
             direct_group,
             gather_group,
             params,
-            image_sum,
+            image_sums,
             width: camera.width,
             height: camera.height,
         }
@@ -167,18 +172,24 @@ impl ImageEstimate {
     /// Records one estimate of every pixel's emission and direct light, Le + D (reads the
     /// camera item buffer and the light windows of this pass).
     pub fn record_direct(&self, encoder: &mut wgpu::CommandEncoder) {
-        self.record(encoder, "direct", &self.direct_pipeline);
+        self.record(encoder, "direct", &self.direct_pipeline, &self.sum_groups[0]);
     }
 
     /// Records one estimate of every pixel's indirect light G, gathered through this step's
     /// bundle (reads the camera item buffer of this pass).
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
-        self.record(encoder, "gather", &self.gather_pipeline);
+        self.record(encoder, "gather", &self.gather_pipeline, &self.sum_groups[1]);
     }
 
-    fn record(&self, encoder: &mut wgpu::CommandEncoder, entry: &str, pipeline: &wgpu::ComputePipeline) {
+    fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        entry: &str,
+        pipeline: &wgpu::ComputePipeline,
+        sum_group: &wgpu::BindGroup,
+    ) {
         let groups = SPEC.grid(entry, [self.width, self.height]);
-        let bind_groups = [&self.bind_group, &self.direct_group, &self.gather_group];
+        let bind_groups = [sum_group, &self.direct_group, &self.gather_group];
         kernel::dispatch(encoder, "firstshot.image_estimate.pass", pipeline, &bind_groups, groups);
     }
 
@@ -205,14 +216,18 @@ impl ImageEstimate {
 
     /// Clears the running sum.
     pub fn clear(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.clear_buffer(&self.image_sum, 0, None);
+        for half in &self.image_sums {
+            encoder.clear_buffer(half, 0, None);
+        }
     }
 
     /// Reads the image sum back (its two halves, Le + D then G, of rgb sum and w the number
     /// of estimates per pixel, each row by row from the top).
     pub fn read_sum(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<[f32; 4]>> {
-        let pixels = self.width as u64 * self.height as u64;
-        buffers::read_back(device, queue, &self.image_sum, 2 * pixels * 16)
+        let bytes = self.width as u64 * self.height as u64 * IMAGE_SUM_BYTES_PER_PIXEL;
+        let mut sum = buffers::read_back(device, queue, &self.image_sums[0], bytes)?;
+        sum.extend(buffers::read_back::<[f32; 4]>(device, queue, &self.image_sums[1], bytes)?);
+        Ok(sum)
     }
 
     /// Reads the image back, row by row from the top (`image_of_sums`).
