@@ -515,6 +515,10 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     let start = Instant::now();
     // Every check that can refuse comes before any folder is made or file written.
     let mut scene = scene::load(&scene_path)?;
+    // What the scene's files hold but the renderer ignores (docs/SCENE_FORMAT.md).
+    for note in &scene.notes {
+        say.say(format!("note: {note}"));
+    }
     if let Some(name) = &args.camera {
         scene.select_camera(name).map_err(|e| usage(format!("--camera {name}: {e}")))?;
     }

@@ -161,6 +161,7 @@ pub fn bare_scene() -> firstshot::scene::Scene {
         materials: vec![],
         surfaces: vec![],
         lights: vec![],
+        notes: vec![],
     }
 }
 
