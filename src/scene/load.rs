@@ -24,10 +24,15 @@ const NAMED_CAMERA_KEYS: &[&str] = &["name", "position", "look_at", "up", "fov_y
 const ENVIRONMENT_KEYS: &[&str] = &["radiance"];
 const SETTINGS_KEYS: &[&str] = &["patch_size", "hemicube_resolution", "bundle_resolution", "iterations", "seed"];
 const TRANSFORM_KEYS: &[&str] = &["scale", "rotate", "translate"];
-const SHAPE_TYPES: &str = "\"quad\", \"triangle\", \"mesh\", \"box\" or \"sierpinski\"";
+const SHAPE_TYPES: &str = "\"quad\", \"triangle\", \"mesh\", \"gltf\", \"box\" or \"sierpinski\"";
 
-/// Loads and validates a scene file. Errors name the file, the key and what was expected.
+/// Loads and validates a scene file: TOML, or glTF 2.0 by its extension (`.gltf`, `.glb`).
+/// Errors name the file, the key and what was expected.
 pub fn load(path: &Path) -> Result<Scene> {
+    let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if matches!(extension.as_deref(), Some("gltf" | "glb")) {
+        return super::gltf::load_scene(path);
+    }
     let bytes = crate::files::read_named_input(path)?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let at = e.utf8_error().valid_up_to();
@@ -306,7 +311,7 @@ fn shape(t: &Tbl, materials: &Materials, imported: &mut Imported) -> Result<Vec<
     let kind = type_item.string()?;
     let specific: &[&str] = match kind {
         "quad" | "triangle" => &["vertices"],
-        "mesh" => &["file", "transform"],
+        "mesh" | "gltf" => &["file", "transform"],
         "box" => &["min", "max", "transform"],
         "sierpinski" => &["center", "size", "level", "transform"],
         other => {
@@ -316,9 +321,10 @@ fn shape(t: &Tbl, materials: &Materials, imported: &mut Imported) -> Result<Vec<
     let mut allowed = vec!["type", "material", "emission", "two_sided"];
     allowed.extend_from_slice(specific);
     if t.table.contains_key("transform") && !allowed.contains(&"transform") {
-        return Err(t
-            .cx
-            .err(t.child("transform"), format!("a {kind} takes no transform (only mesh, box and sierpinski do)")));
+        return Err(t.cx.err(
+            t.child("transform"),
+            format!("a {kind} takes no transform (only mesh, gltf, box and sierpinski do)"),
+        ));
     }
     t.only(&allowed)?;
 
@@ -327,7 +333,7 @@ fn shape(t: &Tbl, materials: &Materials, imported: &mut Imported) -> Result<Vec<
             let name = m.string()?;
             Some(materials.find(name).map_err(|msg| m.err(msg))?)
         }
-        None if kind == "mesh" => None,
+        None if kind == "mesh" || kind == "gltf" => None,
         None => {
             return Err(t.cx.err(t.child("material"), "required: a [materials] name"));
         }
@@ -385,6 +391,41 @@ fn shape(t: &Tbl, materials: &Materials, imported: &mut Imported) -> Result<Vec<
                 .map(with(m))
                 .collect();
             (format!("{} (sierpinski level {level})", t.key), triangles)
+        }
+        "gltf" => {
+            let file_item = t.req("file", "the path of a glTF file (.gltf or .glb)")?;
+            let written = file_item.string()?;
+            let path = t.cx.file.parent().map_or_else(|| PathBuf::from(written), |dir| dir.join(written));
+            if !path.is_file() {
+                return Err(file_item.err(format!("glTF file {} does not exist or is not a file", path.display())));
+            }
+            let placement = super::gltf::Placement {
+                transform: glam::DMat4::from_scale_rotation_translation(
+                    transform.scale,
+                    transform.rotation,
+                    transform.translation,
+                ),
+                material,
+                first_material: (materials.list.len() + imported.materials.len()) as u32,
+                origin: format!("{} (gltf \"{written}\")", t.key),
+            };
+            let model = super::gltf::read(&path, &placement)?;
+            imported.materials.extend(model.materials);
+            imported.notes.extend(model.notes);
+            if !model.lights.is_empty() || !model.cameras.is_empty() {
+                imported.notes.push(format!(
+                    "{}: the {} lights and {} cameras of a glTF placed as a shape are ignored: give the TOML scene its own",
+                    t.key,
+                    model.lights.len(),
+                    model.cameras.len()
+                ));
+            }
+            let mut surfaces = model.surfaces;
+            for s in &mut surfaces {
+                s.emission = emission_key.unwrap_or(s.emission);
+                s.two_sided |= two_sided;
+            }
+            return Ok(surfaces);
         }
         _ => {
             let file_item = t.req("file", "the path of an OBJ file")?;

@@ -7,6 +7,7 @@
 pub mod brdf;
 pub mod camera_path;
 pub mod contact;
+pub mod gltf;
 pub mod load;
 pub mod mtl;
 pub mod shapes;
