@@ -120,18 +120,16 @@ fn box_gltf() -> GltfWriter {
         }
         w.material(m);
     }
-    let parent = w.node(json!({"name": "room", "translation": [1.0, 0.0, 0.0], "children": []}), true);
     for (k, (q, m, _)) in box_quads().into_iter().enumerate() {
         let n = if is_triangle(&q) { 3 } else { 4 };
         let fan: Vec<u32> = if n == 3 { vec![0, 1, 2] } else { vec![0, 1, 2, 0, 2, 3] };
         let node = match k % 3 {
-            // Under the parent (x + 1) with its own translation (y + 2): data moved back.
+            // Under a parent (x + 1) with its own translation (y + 2): the data moved back.
             0 => {
                 let data: Vec<[f32; 3]> = q[..n].iter().map(|v| [v[0] - 1.0, v[1] - 2.0, v[2]]).collect();
                 let mesh = w.mesh(&data, Some(&fan), Some(m));
                 let child = w.node(json!({"mesh": mesh, "translation": [0.0, 2.0, 0.0]}), false);
-                w.nodes[parent]["children"].as_array_mut().unwrap().push(json!(child));
-                continue;
+                json!({"name": "parent", "translation": [1.0, 0.0, 0.0], "children": [child]})
             }
             // Mirrored in x: the data mirrored, and each triangle wound the other way.
             1 => {

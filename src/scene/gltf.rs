@@ -258,6 +258,9 @@ fn read_buffers(path: &Path, document: &gltf::Document, mut blob: Option<Vec<u8>
         if data.len() < buffer.length() {
             return Err(err(format!("holds {} bytes, fewer than its byteLength {}", data.len(), buffer.length())));
         }
+        // Accessors must stay within the declared length, whatever follows it.
+        let mut data = data;
+        data.truncate(buffer.length());
         out.push(data);
     }
     Ok(out)
