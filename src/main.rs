@@ -64,7 +64,7 @@ struct MergeArgs {
 
 #[derive(Args)]
 pub(crate) struct RenderArgs {
-    /// The scene file (TOML, docs/SCENE_FORMAT.md).
+    /// The scene file: TOML, or glTF 2.0 (.gltf, .glb) by its extension (docs/SCENE_FORMAT.md).
     #[arg(required_unless_present = "list_adapters")]
     scene: Option<PathBuf>,
     /// Image to write, PATH.exr (linear float RGB), and PATH.png (tonemapped sRGB) beside it;

@@ -513,7 +513,7 @@ fn test15_shape_refusals() {
     refused(&edited(&[(material, "material = \"white\"\ntwo_sided = 1")]), "shapes[0].two_sided");
     assert_contains(
         &refused(&edited(&[(material, "material = \"white\"\ntransform = { scale = 2 }")]), "shapes[0].transform"),
-        "only mesh, box and sierpinski",
+        "only mesh, gltf, box and sierpinski",
     );
     assert_contains(&refused(&edited(&[("type = \"quad\"", "type = \"disc\"")]), "shapes[0].type"), "\"sierpinski\"");
     refused(&edited(&[("type = \"quad\"", "")]), "shapes[0].type");
