@@ -370,7 +370,7 @@ impl Reader<'_> {
                 Some(a) => self.indices(&key, &a, positions.len())?,
                 None => (0..positions.len() as u32).collect(),
             };
-            if indices.len() % 3 != 0 {
+            if !indices.len().is_multiple_of(3) {
                 return Err(self.err(&key, format!("has {} indices, not a multiple of 3 (triangles)", indices.len())));
             }
             let (material, emission, two_sided) = self.material(&primitive.material())?;

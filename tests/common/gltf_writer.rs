@@ -23,7 +23,7 @@ pub struct GltfWriter {
 
 impl GltfWriter {
     fn push_view(&mut self, bytes: &[u8], target: u32) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -138,11 +138,11 @@ impl GltfWriter {
     /// A binary `.glb`: header, JSON chunk (space-padded), BIN chunk (zero-padded).
     pub fn glb(&self) -> Vec<u8> {
         let mut json = self.document(json!({"byteLength": self.bin.len()})).to_string().into_bytes();
-        while json.len() % 4 != 0 {
+        while !json.len().is_multiple_of(4) {
             json.push(b' ');
         }
         let mut bin = self.bin.clone();
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let total = 12 + 8 + json.len() + 8 + bin.len();
