@@ -156,12 +156,12 @@ fn box_gltf() -> GltfWriter {
 fn test02_a_gltf_box_renders_bit_identically_to_the_same_box_in_toml() {
     let dir = Scratch::new("gltf", "box");
     let toml = dir.join("box.toml");
-    write(&toml, &box_toml());
+    write(&toml, box_toml());
     let writer = box_gltf();
     let embedded = dir.join("box.gltf");
-    write(&embedded, &writer.gltf_embedded());
+    write(&embedded, writer.gltf_embedded());
     let (text, bin) = writer.gltf_with_bin("box data.bin");
-    write(&dir.join("split.gltf"), &text.replace("box data.bin", "box%20data.bin"));
+    write(&dir.join("split.gltf"), text.replace("box data.bin", "box%20data.bin"));
     std::fs::write(dir.join("box data.bin"), bin).unwrap();
     let glb = dir.join("box.glb");
     std::fs::write(&glb, writer.glb()).unwrap();
