@@ -64,7 +64,7 @@ struct MergeArgs {
 
 #[derive(Args)]
 pub(crate) struct RenderArgs {
-    /// The scene file (TOML, docs/SCENE_FORMAT.md).
+    /// The scene file: TOML, or glTF 2.0 (.gltf, .glb) by its extension (docs/SCENE_FORMAT.md).
     #[arg(required_unless_present = "list_adapters")]
     scene: Option<PathBuf>,
     /// Image to write, PATH.exr (linear float RGB), and PATH.png (tonemapped sRGB) beside it;
@@ -515,6 +515,10 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     let start = Instant::now();
     // Every check that can refuse comes before any folder is made or file written.
     let mut scene = scene::load(&scene_path)?;
+    // What the scene's files hold but the renderer ignores (docs/SCENE_FORMAT.md).
+    for note in &scene.notes {
+        say.say(format!("note: {note}"));
+    }
     if let Some(name) = &args.camera {
         scene.select_camera(name).map_err(|e| usage(format!("--camera {name}: {e}")))?;
     }

@@ -7,7 +7,9 @@
 pub mod brdf;
 pub mod camera_path;
 pub mod contact;
+pub mod gltf;
 pub mod load;
+pub mod mtl;
 pub mod shapes;
 pub mod tessellate;
 
@@ -38,6 +40,9 @@ pub struct Scene {
     /// Every `[[shapes]]` entry, already turned into triangles in scene space.
     pub surfaces: Vec<Surface>,
     pub lights: Vec<Light>,
+    /// What the loader read but does not render (a glTF texture, an MTL transparency, a
+    /// Ks scaled down to conserve energy): one line each, printed as `note: ...`.
+    pub notes: Vec<String>,
 }
 
 /// A pinhole camera (right-handed; image right = normalize(forward x up)).

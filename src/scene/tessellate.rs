@@ -620,6 +620,7 @@ pub(crate) mod tests {
             materials: vec![Material { name: "white".into(), kind: MaterialKind::Diffuse { albedo: [0.5; 3] } }],
             surfaces,
             lights,
+            notes: Vec::new(),
         }
     }
 
