@@ -143,13 +143,21 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
 // V(y, x) for the light whose window is faces[first..first + count], x on patch j: 1 unless a
 // surface of the window's item buffer around the direction of x lies on the segment between
 // them. Fields are read one by one: a CPU adapter loads every field of a whole-struct read.
+//
+// A directional light's window is one parallel view (VIEW_ORTHOGRAPHIC) and y is the point
+// of its plane behind the scene from which the light reaches x: the texels are those around
+// x's own projection.
 fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     let w = x - y;
     let f = window_face(w, first, count);
     let z = dot(w, faces[f].view.forward.xyz);
     let right = faces[f].view.right;
     let up = faces[f].view.up;
-    let window = vec2<f32>(dot(w, right.xyz), dot(w, up.xyz)) / z - faces[f].view.jitter.zw;
+    var window = vec2<f32>(dot(w, right.xyz), dot(w, up.xyz)) / z - faces[f].view.jitter.zw;
+    if (faces[f].view.size.z == VIEW_ORTHOGRAPHIC) {
+        let rel = x - faces[f].view.eye.xyz;
+        window = vec2<f32>(dot(rel, right.xyz), dot(rel, up.xyz));
+    }
     let ndc = clamp(window / vec2<f32>(right.w, up.w), vec2<f32>(-1.0), vec2<f32>(1.0));
     let side = faces[f].view.size.x;
     let tile = faces[f].tile;
@@ -208,16 +216,33 @@ fn emitted_share(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
 fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
     for (var i = 0u; i < params.light_count; i++) {
-        let y = lights[i].position.xyz;
+        let kind = lights[i].kind;
+        var y = lights[i].position.xyz;
+        if (kind == LIGHT_DIRECTIONAL) {
+            // The sun's light reaches x from the plane of its parallel view, straight back
+            // along its direction of travel d.
+            let d = lights[i].normal.xyz;
+            y = x - d * dot(x - faces[lights[i].first_face].view.eye.xyz, d);
+        }
         let to_light = y - x;
         let r2 = dot(to_light, to_light);
-        let w_in = to_light * inverseSqrt(r2);
+        var w_in = to_light * inverseSqrt(r2);
+        if (kind == LIGHT_DIRECTIONAL) {
+            w_in = -lights[i].normal.xyz;
+        }
         let cos_x = dot(n, w_in);
         if (cos_x <= 0.0 || r2 <= 0.0) {
             continue;
         }
         var g = cos_x / r2;
-        if (lights[i].kind == LIGHT_AREA) {
+        if (kind == LIGHT_DIRECTIONAL) {
+            // Irradiance on a surface facing the light: no distance falloff.
+            g = cos_x;
+        }
+        if (kind == LIGHT_SPOT) {
+            g *= spot_falloff(dot(lights[i].normal.xyz, -w_in), lights[i].cone.x, lights[i].cone.y);
+        }
+        if (kind == LIGHT_AREA) {
             let cos_l = max(0.0, dot(lights[i].normal.xyz, -w_in));
             g *= cos_l;
             if (params.mis != 0u && lights[i].normal.w > 0.0) {
