@@ -478,3 +478,29 @@ fn test07_no_first_shot_is_refused_for_suns_and_spots() {
         assert!(message.contains("--no-first-shot") && message.contains(&format!("{kind} light")), "{message}");
     }
 }
+
+#[test]
+fn test08_sun_does_not_leak_through_a_tessellated_roof() {
+    // A roof of small patches (seen from the sun by its back) over part of the floor: its
+    // triangles' corners poke between the sun's texel centres at every mesh vertex. Per pixel,
+    // the floor under it must be as dark as the caster says, and the rest lit.
+    let (d, _) = sun_direction();
+    let text = FLOOR_AND_OCCLUDER
+        .replace("patch_size = 0.5", "patch_size = 0.1")
+        .replace(
+            "vertices = [[-0.4, 0.6, -0.3], [-0.1, 0.7, 0.5], [0.5, 0.55, 0.0]]",
+            "vertices = [[-0.3, 0.5, -1.0], [1.0, 0.5, -1.0], [1.0, 0.5, 0.8], [-0.3, 0.5, 0.8]]",
+        )
+        .replace("type = \"triangle\"", "type = \"quad\"")
+        + &format!(
+            "[[lights]]\ntype = \"directional\"\ndirection = [{}, {}, {}]\nirradiance = [2.0, 2.0, 2.0]\n",
+            d.x, d.y, d.z
+        );
+    let (_scratch, scene) = load("roof", &text);
+    let roof = &scene.surfaces[1].triangles[0];
+    assert!((roof.vertices[1] - roof.vertices[0]).cross(roof.vertices[2] - roof.vertices[0]).y < 0.0, "faces down");
+    let Some(image) = render_direct(&scene, 4) else { return };
+    let sun = |x: DVec3, n: DVec3| (x - 100.0 * d, 2.0 * n.dot(-d).max(0.0));
+    let (_, _, shadowed) = compare_per_pixel(&image, &scene, &sun, 5e-3, 1e-6);
+    assert!(shadowed > 200, "the roof must shade the floor ({shadowed} pixels)");
+}
