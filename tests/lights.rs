@@ -504,3 +504,64 @@ fn test08_sun_does_not_leak_through_a_tessellated_roof() {
     let (_, _, shadowed) = compare_per_pixel(&image, &scene, &sun, 5e-3, 1e-6);
     assert!(shadowed > 200, "the roof must shade the floor ({shadowed} pixels)");
 }
+
+#[test]
+fn test09_sun_room_renders_with_its_sunlit_patch() {
+    // The shipped example, small: the floor where the sun falls through the window, the
+    // floor in the shade and the spot's pool on the block's top, direct light and a few
+    // steps of the iteration.
+    let Some(ctx) = common::gpu() else { return };
+    let scene = scene::load(&common::scenes::shipped("sun_room")).unwrap();
+    let mut options = RenderOptions::from_scene(&scene);
+    (options.width, options.height) = (64, 48);
+    (options.iterations, options.direct_passes, options.burn_in) = (8, 4, Some(2));
+    (options.hemicube_resolution, options.bundle_resolution, options.shadow_resolution) = (128, 64, 256);
+    let patches = scene::tessellate(&scene, options.patch_size).unwrap();
+    let image = render(&ctx, &scene, &patches, &options).unwrap().image;
+    // Finite; not necessarily >= 0 after 8 steps: the control variate's K_j can be negative
+    // (docs/ALGORITHM.md 2), and a few dark pixels' gathers are, by a few 1e-3.
+    assert!(image.pixels.iter().flatten().all(|c| c.is_finite()));
+    // Where the camera ray through a pixel centre meets the floor: in the sun (by the
+    // caster) at albedo / pi E cos(theta) or more (the room adds light), in the shade less.
+    // The caster gives visibility only: materials made diffuse for it.
+    let mut grey = scene.clone();
+    for m in &mut grey.materials {
+        m.kind = firstshot::scene::MaterialKind::Diffuse { albedo: [0.5; 3] };
+    }
+    let caster = Caster::new(&grey);
+    let Light::Directional { direction: d, irradiance } = scene.lights[0] else { panic!("the sun comes first") };
+    let floor_albedo = 0.55;
+    let sunlit = floor_albedo / PI * irradiance[0] as f64 * d.dot(DVec3::NEG_Y);
+    let (mut in_sun, mut in_shade) = (0, 0);
+    for py in 0..image.height {
+        for px in 0..image.width {
+            let (o, dir) = camera_ray(&scene.camera, image.width, image.height, px as f64 + 0.5, py as f64 + 0.5);
+            let Some((t, _)) = caster.hit(o, dir, 1e-9, f64::INFINITY) else { continue };
+            let x = o + t * dir;
+            if x.y.abs() > 1e-6 {
+                continue; // not the floor
+            }
+            // Well inside or well outside the sunlit patch: the floor points seen through the
+            // pixel's corners, and points 8 cm (3 of the sun's texels) around them, agree.
+            let lit = |x: DVec3| !caster.occluded(x, x - 100.0 * d);
+            let corners = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)].map(|(sx, sy)| {
+                let (o, dir) = camera_ray(&scene.camera, image.width, image.height, px as f64 + sx, py as f64 + sy);
+                o + dir * (-o.y / dir.y)
+            });
+            let steps = [DVec3::ZERO, DVec3::X, DVec3::NEG_X, DVec3::Z, DVec3::NEG_Z];
+            if corners.iter().flat_map(|&c| steps.map(|s| c + 0.08 * s)).any(|p| lit(p) != lit(x)) {
+                continue;
+            }
+            let ours = image.at(px, py)[0] as f64;
+            if lit(x) {
+                in_sun += 1;
+                assert!(ours >= sunlit * 0.995, "pixel ({px}, {py}) in the sun: {ours} < {sunlit}");
+            } else {
+                in_shade += 1;
+                assert!(ours < 0.5 * sunlit, "pixel ({px}, {py}) in the shade: {ours}");
+            }
+        }
+    }
+    eprintln!("{in_sun} floor pixels in the sun (at least {sunlit:.4}), {in_shade} in the shade");
+    assert!(in_sun > 50 && in_shade > 50, "{in_sun} {in_shade}");
+}
