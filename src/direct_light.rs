@@ -30,6 +30,10 @@ use glam::DVec3;
 
 /// Texels of both atlases together at most (an id and a depth of 4 bytes each: 256 MiB).
 pub const SHADOW_TEXEL_BUDGET: u64 = 1 << 25;
+/// A directional light's parallel view has this many times the side of a cube face (16 times
+/// its texels): its texel is the error of its shadows' outlines (docs/ALGORITHM.md 6), over
+/// the whole scene.
+pub const SUN_VIEW_SCALE: u32 = 4;
 /// The smallest face side the budget may shrink faces to.
 pub const MIN_SHADOW_RESOLUTION: u32 = 8;
 
@@ -93,7 +97,8 @@ pub struct DirectLights {
     kept: WindowAtlas,
     per_pass: WindowAtlas,
     window: LightWindow,
-    /// Pixels along a full face edge, after the memory budget.
+    /// Pixels along a full face edge, after the memory budget (a sun's view: `SUN_VIEW_SCALE`
+    /// times as many).
     pub resolution: u32,
     /// The pass whose points the tables hold.
     prepared: Option<u64>,
@@ -203,7 +208,13 @@ impl DirectLights {
                         Source::Area { triangles, .. } => triangles[0].1,
                         _ => DVec3::ZERO,
                     };
-                    first_shot::faces(&window_sample(source, *position, normal), window, r, near, bounds)
+                    // A sun's one view spans the whole scene where a cube face spans a quarter
+                    // of a point's surroundings: it gets SUN_VIEW_SCALE times the side.
+                    let side = match source {
+                        Source::Directional { .. } => (SUN_VIEW_SCALE * r).min(max_side),
+                        _ => r,
+                    };
+                    first_shot::faces(&window_sample(source, *position, normal), window, side, near, bounds)
                         .0
                         .into_iter()
                         .map(move |f| (i, f, atlas))
@@ -214,7 +225,7 @@ impl DirectLights {
         let (faces, corners, sizes) = loop {
             let faces = layout(r);
             let tiles = |atlas: u32| -> Vec<(u32, u32)> {
-                faces.iter().filter(|f| f.2 == atlas).map(|f| (r, f.1.rows)).collect()
+                faces.iter().filter(|f| f.2 == atlas).map(|f| (f.1.view.size[0], f.1.rows)).collect()
             };
             let (kept_corners, kept_size) = pack(&tiles(KEPT), max_side);
             let (pass_corners, pass_size) = pack(&tiles(PER_PASS), max_side);
