@@ -109,6 +109,7 @@ fn compare_per_pixel(
     let caster = Caster::new(scene);
     let (w, h) = (image.width, image.height);
     let (mut exact, mut edges, mut shadowed) = (0, 0, 0);
+    let (mut worst_relative, mut worst_absolute) = (0.0f64, 0.0f64);
     for py in 0..h {
         for px in 0..w {
             const N: u32 = 8;
@@ -139,6 +140,10 @@ fn compare_per_pixel(
                 continue;
             }
             exact += 1;
+            if expected > 0.0 {
+                worst_relative = worst_relative.max((ours - expected).abs() / expected);
+            }
+            worst_absolute = worst_absolute.max((ours - expected).abs());
             if expected == 0.0 && kinds.iter().all(|k| k.0.is_some()) {
                 shadowed += 1;
             }
@@ -148,7 +153,9 @@ fn compare_per_pixel(
             );
         }
     }
-    eprintln!("{exact} pixels exact, {edges} edge pixels, {shadowed} in full shadow");
+    eprintln!(
+        "{exact} pixels exact (worst error {worst_relative:.2e} relative, {worst_absolute:.2e} absolute), {edges} edge pixels, {shadowed} in full shadow"
+    );
     (exact, edges, shadowed)
 }
 
@@ -204,17 +211,18 @@ fn test02_spot_follows_the_gltf_falloff_per_pixel() {
     );
     let (_scratch, scene) = load("spot", &text);
     assert_eq!(scene.surfaces.len(), 1, "the floor alone");
-    let Some(image) = render_direct(&scene, 16) else { return };
+    let Some(image) = render_direct(&scene, 64) else { return };
     let spot = |x: DVec3, n: DVec3| {
         let to = x - position;
         let r2 = to.length_squared();
         let w = to / r2.sqrt();
         (position, intensity * gltf_falloff(w.dot(axis), inner, outer) * n.dot(-w).max(0.0) / r2)
     };
-    // The falloff is smooth but not linear across a pixel: the pixel's 64-point mean against
-    // the GPU's 16 jittered samples leaves up to a few 1e-3 of the peak in the steepest ring.
+    // The falloff is smooth but not linear across a pixel (and has a kink at the inner
+    // cone): the pixel's 64-point mean against the GPU's 64 jittered samples leaves up to
+    // 1.3e-3 of the peak in the steepest ring (measured).
     let peak = ALBEDO / PI * intensity / (position.y * position.y);
-    compare_per_pixel(&image, &scene, &spot, 5e-3, 3e-3 * peak);
+    compare_per_pixel(&image, &scene, &spot, 5e-3, 2e-3 * peak);
     // The profile: inside the inner cone, between the cones, beyond the outer one.
     let (mut inside, mut between, mut beyond) = (0, 0, 0);
     for py in 0..image.height {
