@@ -80,7 +80,7 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     time: Option<f64>,
     /// Solve the area lights and emitting shapes as emitters inside the iteration instead of
-    /// first shot.
+    /// first shot (refused with point, spot or directional lights).
     #[arg(long)]
     no_first_shot: bool,
     /// Pixels along an edge of each parallel projection of the iteration.

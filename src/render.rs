@@ -281,10 +281,18 @@ pub fn fingerprint(scene: &Scene, options: &RenderOptions) -> u64 {
 /// it before opening an adapter, so that such a refusal is a usage error (exit 2) even on a
 /// machine without one.
 pub fn check_options(scene: &Scene, options: &RenderOptions) -> Result<()> {
-    if !options.first_shot && scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Point { .. })) {
-        return Err(Error::Usage(
-            "--no-first-shot: the scene has point lights, which only the first shot can handle (a point has no area to emit from inside the iteration); drop --no-first-shot or replace them by small area lights".into(),
-        ));
+    use crate::scene::Light;
+    // Lights without an area to emit from inside the iteration.
+    let without_area = scene.lights.iter().find_map(|l| match l {
+        Light::Point { .. } => Some("point"),
+        Light::Spot { .. } => Some("spot"),
+        Light::Directional { .. } => Some("directional"),
+        Light::Area { .. } => None,
+    });
+    if let (false, Some(kind)) = (options.first_shot, without_area) {
+        return Err(Error::Usage(format!(
+            "--no-first-shot: the scene has {kind} lights, which only the first shot can handle (a {kind} light has no area to emit from inside the iteration); drop --no-first-shot or replace them by small area lights"
+        )));
     }
     Ok(())
 }

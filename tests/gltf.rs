@@ -224,9 +224,14 @@ fn test03_lights_cameras_and_what_is_ignored() {
     w.extra.push(("textures".into(), json!([{"source": 0}])));
     w.extra.push(("images".into(), json!([{"uri": "wood.png"}])));
     w.lights.push(json!({"name": "bulb", "type": "point", "intensity": 10.0, "color": [1.0, 0.5, 0.25]}));
-    w.lights.push(json!({"name": "sun", "type": "directional", "intensity": 3.0}));
+    w.lights.push(json!({"name": "sun", "type": "directional", "intensity": 3.0, "color": [1.0, 0.5, 0.25]}));
+    w.lights.push(json!({"name": "cone", "type": "spot", "intensity": 7.0,
+        "spot": {"innerConeAngle": 0.25, "outerConeAngle": 0.5}}));
     w.node(json!({"extensions": {"KHR_lights_punctual": {"light": 0}}, "translation": [0.0, 0.0, 2.0]}), true);
-    w.node(json!({"extensions": {"KHR_lights_punctual": {"light": 1}}}), true);
+    // The sun's node turns its -z onto -y (a quarter turn about +x): it shines straight down.
+    let q = std::f32::consts::FRAC_1_SQRT_2;
+    w.node(json!({"extensions": {"KHR_lights_punctual": {"light": 1}}, "rotation": [-q, 0.0, 0.0, q]}), true);
+    w.node(json!({"extensions": {"KHR_lights_punctual": {"light": 2}}, "translation": [1.0, 2.0, 3.0]}), true);
     w.cameras.push(
         json!({"name": "wide", "type": "perspective", "perspective": {"yfov": 1.0, "aspectRatio": 2.0, "znear": 0.1}}),
     );
@@ -242,7 +247,21 @@ fn test03_lights_cameras_and_what_is_ignored() {
     w.node(json!({"camera": 2}), true);
     let mut scene = load_written(&dir, "lit.gltf", &w.gltf_embedded()).unwrap();
 
-    let [Light::Point { position, power }] = scene.lights[..] else { panic!("{:?}", scene.lights) };
+    let [
+        Light::Point { position, power },
+        Light::Directional { direction, irradiance },
+        Light::Spot { position: spot_at, direction: axis, intensity, inner_angle, outer_angle },
+    ] = scene.lights[..]
+    else {
+        panic!("{:?}", scene.lights)
+    };
+    // Lux read as W/m^2 times the colour; the direction is the node's -z.
+    assert_eq!(irradiance, [3.0, 1.5, 0.75]);
+    assert!(direction.distance(DVec3::NEG_Y) < 1e-6, "{direction}");
+    // Candela read as W/sr; radians to degrees; the node's -z.
+    assert_eq!(intensity, [7.0; 3]);
+    assert_eq!((spot_at, axis), (DVec3::new(1.0, 2.0, 3.0), DVec3::NEG_Z));
+    assert!((inner_angle - 0.25f64.to_degrees()).abs() < 1e-5 && (outer_angle - 0.5f64.to_degrees()).abs() < 1e-5);
     assert_eq!(position, DVec3::new(0.0, 0.0, 2.0));
     let expected = [1.0, 0.5, 0.25].map(|c| 4.0 * std::f64::consts::PI * 10.0 * c);
     for c in 0..3 {
@@ -257,10 +276,10 @@ fn test03_lights_cameras_and_what_is_ignored() {
     scene.select_camera("tall").unwrap();
     assert_eq!((scene.camera.width, scene.camera.height), (256, 512));
     assert!((scene.camera.look_at - scene.camera.position).distance(DVec3::NEG_X) < 1e-6, "{:?}", scene.camera);
-    // One line each for the texture, the directional light and the orthographic camera.
+    // One line each for the texture and the orthographic camera.
     let notes = scene.notes.join("\n");
-    assert_eq!(scene.notes.len(), 3, "{notes}");
-    for part in ["materials[0] \"wood\": baseColorTexture is ignored", "\"sun\"", "orthographic"] {
+    assert_eq!(scene.notes.len(), 2, "{notes}");
+    for part in ["materials[0] \"wood\": baseColorTexture is ignored", "orthographic"] {
         assert!(notes.contains(part), "{notes}");
     }
     assert!(scene.notes.iter().all(|n| n.contains("lit.gltf")), "{notes}");

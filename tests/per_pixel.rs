@@ -363,7 +363,7 @@ fn test05_many_point_lights_fit_the_shadow_budget() {
         .iter()
         .map(|l| match *l {
             Light::Point { position, power } => (position, None, power[0] as f64 / (4.0 * std::f64::consts::PI)),
-            Light::Area { .. } => unreachable!(),
+            _ => unreachable!(),
         })
         .collect();
     let (o, d) = camera_ray(&scene.camera, 24, 24, 3.5, 3.5);

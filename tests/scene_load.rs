@@ -602,7 +602,7 @@ fn test16_light_refusals() {
     assert_contains(&message, "blue");
     refused(&light("type = \"point\"\nposition = [0, 1, 0]\npower = [-1, 1, 1]"), "lights[1].power");
     refused(&light("type = \"point\"\nposition = [0, 1, 0]"), "lights[1].power");
-    refused(&light("type = \"spot\"\nposition = [0, 1, 0]"), "lights[1].type");
+    refused(&light("type = \"laser\"\nposition = [0, 1, 0]"), "lights[1].type");
     assert_contains(
         &refused(
             &light("type = \"point\"\nposition = [0, 1, 0]\npower = [1, 1, 1]\nradiance = [1, 1, 1]"),

@@ -105,7 +105,7 @@ pub fn load_scene(path: &Path) -> Result<Scene> {
     if !emits {
         return Err(err(
             "lights",
-            "the glTF scene has no light: give it a KHR_lights_punctual point light or an emissive material, \
+            "the glTF scene has no light: give it a KHR_lights_punctual light (point, directional or spot) or an emissive material, \
              or place the model in a TOML scene with a `gltf` shape (docs/SCENE_FORMAT.md)",
         ));
     }
@@ -597,8 +597,55 @@ impl Reader<'_> {
                 }
                 self.lights.push(Light::Point { position: world.transform_point3(DVec3::ZERO), power });
             }
-            LightKind::Directional => self.note(&key, "directional lights are not supported by this build: ignored"),
-            LightKind::Spot { .. } => self.note(&key, "spot lights are not supported by this build: ignored"),
+            LightKind::Directional => {
+                // Intensity in lux, read as W/m^2: the irradiance on a surface facing the
+                // light. It shines along the node's local -z.
+                let intensity = f64::from(light.intensity());
+                let irradiance = light.color().map(|c| (intensity * f64::from(c)) as f32);
+                if irradiance.iter().any(|p| !p.is_finite() || *p < 0.0) {
+                    self.note(&key, format!("ignored: its irradiance {irradiance:?} is not finite and >= 0"));
+                    return;
+                }
+                let Some(direction) = world.transform_vector3(DVec3::NEG_Z).try_normalize() else {
+                    self.note(&key, "ignored: its node's transform collapses the light's direction");
+                    return;
+                };
+                self.lights.push(Light::Directional { direction, irradiance });
+            }
+            LightKind::Spot { inner_cone_angle, outer_cone_angle } => {
+                // Intensity in candela, read as W/sr, on the axis (the node's local -z); the
+                // cone angles are radians in glTF, degrees in the scene.
+                let intensity = f64::from(light.intensity());
+                let intensity = light.color().map(|c| (intensity * f64::from(c)) as f32);
+                let (inner, outer) =
+                    (f64::from(inner_cone_angle).to_degrees(), f64::from(outer_cone_angle).to_degrees());
+                if intensity.iter().any(|p| !p.is_finite() || *p < 0.0) {
+                    self.note(&key, format!("ignored: its intensity {intensity:?} is not finite and >= 0"));
+                    return;
+                }
+                if !(0.0 <= inner && inner < outer && outer <= 90.0) {
+                    self.note(
+                        &key,
+                        format!("ignored: its cone angles ({inner:.3} and {outer:.3} degrees) are not 0 <= inner < outer <= 90"),
+                    );
+                    return;
+                }
+                let Some(direction) = world.transform_vector3(DVec3::NEG_Z).try_normalize() else {
+                    self.note(&key, "ignored: its node's transform collapses the light's direction");
+                    return;
+                };
+                if light.range().is_some() {
+                    self.note(&key, "its range is ignored (the light falls off with the inverse square everywhere)");
+                }
+                let position = world.transform_point3(DVec3::ZERO);
+                self.lights.push(Light::Spot {
+                    position,
+                    direction,
+                    intensity,
+                    inner_angle: inner,
+                    outer_angle: outer,
+                });
+            }
         }
     }
 }

@@ -103,6 +103,8 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
     let emits = lights.iter().any(|l| match l {
         Light::Point { power, .. } => glows(power),
         Light::Area { radiance, .. } => glows(radiance),
+        Light::Directional { irradiance, .. } => glows(irradiance),
+        Light::Spot { intensity, .. } => glows(intensity),
     }) || surfaces.iter().any(|s| glows(&s.emission))
         || glows(&environment);
     if !emits {
@@ -612,8 +614,10 @@ fn transform(t: &Tbl) -> Result<Transform> {
     Ok(out)
 }
 
+const LIGHT_TYPES: &str = "\"point\", \"area\", \"directional\" or \"spot\"";
+
 fn light(t: &Tbl) -> Result<Light> {
-    let type_item = t.req("type", "\"point\" or \"area\"")?;
+    let type_item = t.req("type", LIGHT_TYPES)?;
     match type_item.string()? {
         "point" => {
             t.only(&["type", "position", "power"])?;
@@ -636,8 +640,48 @@ fn light(t: &Tbl) -> Result<Light> {
             };
             Ok(Light::Area { vertices, radiance, subdivisions })
         }
-        other => Err(type_item.err(format!("unknown light type \"{other}\": expected \"point\" or \"area\""))),
+        "directional" => {
+            t.only(&["type", "direction", "irradiance"])?;
+            Ok(Light::Directional {
+                direction: unit_direction(&t.req("direction", "3 numbers, the way the light travels")?)?,
+                irradiance: t.req("irradiance", "3 numbers >= 0 (W/m^2 on a surface facing the light)")?.rgb()?,
+            })
+        }
+        "spot" => {
+            t.only(&["type", "position", "direction", "intensity", "inner_angle", "outer_angle"])?;
+            let position = t.req("position", "3 numbers")?.vec3()?;
+            let direction = unit_direction(&t.req("direction", "3 numbers, the spot's axis")?)?;
+            let intensity = t.req("intensity", "3 numbers >= 0 (W/sr on the axis)")?.rgb()?;
+            // glTF KHR_lights_punctual's defaults and bounds: 0 <= inner < outer <= 90 degrees.
+            let angle = |key: &str, default: f64| -> Result<f64> {
+                let Some(item) = t.get(key) else { return Ok(default) };
+                let degrees = item.number()?;
+                if !(0.0..=90.0).contains(&degrees) {
+                    return Err(item.err(format!("must be from 0 to 90 (degrees from the axis), got {degrees}")));
+                }
+                Ok(degrees)
+            };
+            let inner_angle = angle("inner_angle", 0.0)?;
+            let outer_angle = angle("outer_angle", 45.0)?;
+            if inner_angle >= outer_angle {
+                return Err(t.cx.err(
+                    t.child("inner_angle"),
+                    format!(
+                        "must be less than outer_angle ({outer_angle} degrees{}), got {inner_angle}",
+                        if t.get("outer_angle").is_some() { "" } else { ", its default" }
+                    ),
+                ));
+            }
+            Ok(Light::Spot { position, direction, intensity, inner_angle, outer_angle })
+        }
+        other => Err(type_item.err(format!("unknown light type \"{other}\": expected {LIGHT_TYPES}"))),
     }
+}
+
+/// A direction: 3 numbers, not all zero, normalised.
+fn unit_direction(item: &Item) -> Result<DVec3> {
+    let v = item.vec3()?;
+    v.try_normalize().ok_or_else(|| item.err("must not be zero: it is a direction"))
 }
 
 /// The file being read, for errors.
