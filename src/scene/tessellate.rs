@@ -337,7 +337,8 @@ fn plan_emitters(scene: &Scene, patch_size: f64) -> Result<EmitterPlan> {
     let mut sides = Vec::new();
     for (s, surface) in scene.surfaces.iter().enumerate() {
         let mean = surface.emission.iter().map(|&c| c as f64).sum::<f64>() / 3.0;
-        if !(mean > 0.0) {
+        // Emission is checked >= 0 and finite on loading: a mean of 0 is the only non-emitter.
+        if mean <= 0.0 {
             continue;
         }
         for (t, triangle) in surface.triangles.iter().enumerate() {
