@@ -154,7 +154,8 @@ pub struct GpuEstimateParams {
     /// 1 when the image gathers (G) as well: the direct light of emitting shapes is then
     /// shared between D and G by multiple importance sampling; 0 for a direct-light image.
     pub mis: u32,
-    pub _pad: u32,
+    /// The image row where this band of the image sum starts (`image_estimate`'s bands).
+    pub first_row: u32,
 }
 
 /// A light as the per-pixel direct light sees it in one pass (docs/ALGORITHM.md 6). WGSL:
@@ -296,7 +297,7 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuLightSample => "LightSample" { position, normal, strength, kind, cone_scale, cone_offset }),
         layout!(GpuPatchState => "PatchState" { incoming, direction, diffuse, mean_radiance, diffuse_sum }),
         layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),
-        layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count }),
+        layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count, mis, first_row }),
         layout!(GpuDirectLight => "DirectLight" { position, normal, strength, cone, kind, first_face, faces }),
         layout!(GpuWindowFace => "WindowFace" { view, tile }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),

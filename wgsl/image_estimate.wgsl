@@ -23,8 +23,9 @@
 // `gather`, every step); the image is the sum of their means (the direct light converges
 // in far fewer passes than the indirect, so it is not paid for every step).
 //
-// Each half is a buffer of its own, bound as image_sum in the group 0 that the host binds
-// for the entry point (so one binding holds 16 bytes a pixel, not 32).
+// Each half is a buffer of its own, and each is cut into bands of whole rows, each band a
+// buffer that one binding can hold: the host dispatches every band with its own group 0,
+// binding that band's part of the half as image_sum and its first row in params.
 // Compute, one invocation per pixel: the only writer of its entries of image_sum. Group 1:
 // the direct lights and their window atlases; group 2: this step's bundle, sorted by
 // bundle_transfer.
@@ -427,10 +428,13 @@ fn seen(pixel: vec2<u32>) -> Seen {
 @compute @workgroup_size(8, 8)
 fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
-    if (gid.x >= size.x || gid.y >= size.y) {
+    // This band's rows: its image_sum holds them alone, from params.first_row on.
+    let xy = vec2<u32>(gid.x, gid.y + params.first_row);
+    let pixel = gid.y * size.x + gid.x;
+    if (gid.x >= size.x || xy.y >= size.y || pixel >= arrayLength(&image_sum)) {
         return;
     }
-    let at = seen(gid.xy);
+    let at = seen(xy);
     var radiance = params.environment.rgb;
     if (at.kind == SEEN_BACK) {
         radiance = vec3<f32>(0.0);
@@ -439,7 +443,6 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
         let m = materials[patches[at.j].material];
         radiance = patches[at.j].emission.rgb + direct_light(at.j, at.x, at.n, m, at.w_out);
     }
-    let pixel = gid.y * size.x + gid.x;
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }
 
@@ -448,10 +451,13 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
 @compute @workgroup_size(8, 8)
 fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
-    if (gid.x >= size.x || gid.y >= size.y) {
+    // This band's rows: its image_sum holds them alone, from params.first_row on.
+    let xy = vec2<u32>(gid.x, gid.y + params.first_row);
+    let pixel = gid.y * size.x + gid.x;
+    if (gid.x >= size.x || xy.y >= size.y || pixel >= arrayLength(&image_sum)) {
         return;
     }
-    let at = seen(gid.xy);
+    let at = seen(xy);
     var radiance = vec3<f32>(0.0);
     if (at.kind == SEEN_SURFACE) {
         let m = materials[patches[at.j].material];
@@ -462,6 +468,5 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         let incoming = gathered(at.j, at.x, toward, s);
         radiance = 2.0 * PI * incoming * abs(dot(at.n, d)) * brdf(m, at.n, toward, at.w_out);
     }
-    let pixel = gid.y * size.x + gid.x;
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }

@@ -60,7 +60,7 @@ struct EstimateParams {
     patch_count: u32,
     light_count: u32,
     mis: u32,            // 1: emitting shapes' direct light shared between D and G
-    _pad1: u32,
+    first_row: u32,      // the image row of this band's first (its image_sum starts there)
 }
 
 // A light for the per-pixel direct light of one pass (Rust: GpuDirectLight).
