@@ -86,6 +86,7 @@ impl Display {
             desired_maximum_frame_latency: 1,
             alpha_mode: caps.alpha_modes.first().copied().unwrap_or(wgpu::CompositeAlphaMode::Auto),
             view_formats: vec![],
+            color_space: wgpu::SurfaceColorSpace::Auto,
         };
         surface.configure(&ctx.device, &config);
         let device = &ctx.device;
@@ -281,7 +282,7 @@ impl Display {
         }
         ctx.queue.submit([encoder.finish()]);
         self.window.pre_present_notify();
-        frame.present();
+        ctx.queue.present(frame);
         let image = shot.map(|s| s.read(ctx, self.config.format)).transpose()?;
         // A screenshot is the image's rectangle of the window (the whole window when it is
         // of the image's size).
@@ -301,7 +302,7 @@ impl Display {
     ) {
         let input = self.egui_state.take_egui_input(&self.window);
         let output = self.egui.run_pass(input, |egui| {
-            egui::Area::new(egui::Id::new("firstshot.overlay")).fixed_pos(egui::pos2(6.0, 6.0)).show(egui, |ui| {
+            egui::Area::new(egui::Id::unique("firstshot.overlay")).fixed_pos(egui::pos2(6.0, 6.0)).show(egui, |ui| {
                 egui::Frame::popup(ui.style())
                     .fill(egui::Color32::from_black_alpha(170))
                     .inner_margin(6.0)
@@ -315,8 +316,10 @@ impl Display {
         self.egui_state.handle_platform_output(&self.window, output.platform_output);
         let jobs = self.egui.tessellate(output.shapes, output.pixels_per_point);
         let screen = egui_wgpu::ScreenDescriptor { size_in_pixels: size, pixels_per_point: output.pixels_per_point };
-        for (id, delta) in &output.textures_delta.set {
-            self.egui_renderer.update_texture(&ctx.device, &ctx.queue, *id, delta);
+        for (id, deltas) in &output.textures_delta.set {
+            for delta in deltas {
+                self.egui_renderer.update_texture(&ctx.device, &ctx.queue, *id, delta);
+            }
         }
         let extra = self.egui_renderer.update_buffers(&ctx.device, &ctx.queue, encoder, &jobs, &screen);
         if !extra.is_empty() {
@@ -409,7 +412,9 @@ impl Readback {
         let slice = self.buffer.slice(..);
         slice.map_async(wgpu::MapMode::Read, |_| {});
         ctx.wait()?;
-        let data = slice.get_mapped_range();
+        let data = slice
+            .get_mapped_range()
+            .map_err(|e| Error::Gpu(format!("reading back the window's image: {e}")))?;
         let bgra = matches!(format, wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb);
         let mut rgb = Vec::with_capacity((self.width * self.height * 3) as usize);
         for row in data.chunks_exact(self.bytes_per_row as usize) {

@@ -222,8 +222,7 @@ impl Rates {
         if seconds >= 1.0 {
             self.steps_per_second = self.steps as f64 / seconds;
             self.frames_per_second = self.frames as f64 / seconds;
-            *self = Rates { steps_per_second: self.steps_per_second, frames_per_second: self.frames_per_second, ..Default::default() };
-            self.since = Some(Instant::now());
+            (self.steps, self.frames, self.since) = (0, 0, Some(Instant::now()));
         }
     }
 }
@@ -410,6 +409,10 @@ impl Viewer {
     /// Exits when the script ends.
     fn follow_script(&mut self, event_loop: &ActiveEventLoop) -> Result<(Option<u32>, bool), Failure> {
         let mut moved = false;
+        if self.screenshot.is_some() {
+            // The last frame was not drawn (the window was busy): no further command before it.
+            return Ok((Some(0), moved));
+        }
         loop {
             let Some((_, command)) = self.script.as_mut().and_then(|s| s.front().cloned()) else {
                 // The script ended (or was never there: then a person steers).
@@ -421,14 +424,13 @@ impl Viewer {
             let session = self.session.as_ref().expect("a session runs the script");
             match command {
                 Command::Steps(n) => {
-                    let start = session.renderer.image_start();
-                    if session.step.saturating_sub(start) < n && !moved {
-                        return Ok((Some(start.saturating_add(n)), moved));
-                    }
                     if moved {
-                        // The move restarts the image first: this command waits for the
-                        // next frame.
+                        // The moves restart the image first: the steps begin next frame.
                         return Ok((None, moved));
+                    }
+                    let start = session.renderer.image_start();
+                    if session.step.saturating_sub(start) < n {
+                        return Ok((Some(start.saturating_add(n)), moved));
                     }
                 }
                 Command::Move(direction, distance) => {
@@ -463,9 +465,9 @@ impl Viewer {
 
     /// One frame: the camera's moves, a few steps, the image and the overlay.
     fn frame(&mut self, event_loop: &ActiveEventLoop) -> Result<(), Failure> {
-        let Some(session) = self.session.as_ref() else { return Ok(()) };
-        let since_last = session.frames.checked_sub(0).map(|_| self.rates.since);
-        let _ = since_last;
+        if self.session.is_none() {
+            return Ok(());
+        }
         // What to do this frame: the script's command, or the person's keys and mouse.
         let (script_end, mut moved) = if self.script.is_some() {
             self.follow_script(event_loop)?
