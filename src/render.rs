@@ -883,7 +883,13 @@ impl<'a> Renderer<'a> {
         }
         // No gather adds its share of the emitting shapes' light: D takes all of it.
         for view in &self.views {
-            view.estimate.set_params(queue, self.scene.environment, self.buffers.patch_count, self.direct.count(), false);
+            view.estimate.set_params(
+                queue,
+                self.scene.environment,
+                self.buffers.patch_count,
+                self.direct.count(),
+                false,
+            );
         }
         let mut done = DirectImage::default();
         for k in 0..passes {

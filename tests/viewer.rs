@@ -144,7 +144,11 @@ fn test02_a_bad_script_is_refused_before_any_window_naming_its_line() {
     let scene = common::scenes::shipped("cornell_box").display().to_string();
     let o = firstshot_in(&dir, &["view", &scene, "--script", "s.txt"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("s.txt:2: \"sideways\": expected forward, back, left, right, up or down"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("s.txt:2: \"sideways\": expected forward, back, left, right, up or down"),
+        "{}",
+        stderr(&o)
+    );
     // The environment variable names a script as --script does.
     let o = common::bin::firstshot()
         .args(["view", &scene])

@@ -173,8 +173,7 @@ impl Context {
     where
         W: wgpu::WindowHandle + wgpu::rwh::HasDisplayHandle + Clone + std::fmt::Debug + 'static,
     {
-        let instance =
-            instance_for(wgpu::InstanceDescriptor::new_with_display_handle(Box::new(window.clone())));
+        let instance = instance_for(wgpu::InstanceDescriptor::new_with_display_handle(Box::new(window.clone())));
         let surface = instance
             .create_surface(window)
             .map_err(|e| Error::Adapter(format!("could not make a surface for the window: {e}")))?;

@@ -244,7 +244,12 @@ impl Display {
     /// Draws a frame: the image, then the overlay's `lines` (if any) in a box at the top
     /// left, and presents it. With `screenshot`, also reads back the image as drawn (before
     /// the overlay) and returns it.
-    pub fn frame(&mut self, ctx: &Context, lines: Option<&[String]>, screenshot: bool) -> Result<Option<Image8>, Error> {
+    pub fn frame(
+        &mut self,
+        ctx: &Context,
+        lines: Option<&[String]>,
+        screenshot: bool,
+    ) -> Result<Option<Image8>, Error> {
         let frame = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(f) | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
@@ -303,14 +308,14 @@ impl Display {
         let input = self.egui_state.take_egui_input(&self.window);
         let output = self.egui.run_pass(input, |egui| {
             egui::Area::new(egui::Id::unique("firstshot.overlay")).fixed_pos(egui::pos2(6.0, 6.0)).show(egui, |ui| {
-                egui::Frame::popup(ui.style())
-                    .fill(egui::Color32::from_black_alpha(170))
-                    .inner_margin(6.0)
-                    .show(ui, |ui| {
+                egui::Frame::popup(ui.style()).fill(egui::Color32::from_black_alpha(170)).inner_margin(6.0).show(
+                    ui,
+                    |ui| {
                         for line in lines {
                             ui.label(egui::RichText::new(line).monospace().color(egui::Color32::from_gray(230)));
                         }
-                    });
+                    },
+                );
             });
         });
         self.egui_state.handle_platform_output(&self.window, output.platform_output);
@@ -412,9 +417,7 @@ impl Readback {
         let slice = self.buffer.slice(..);
         slice.map_async(wgpu::MapMode::Read, |_| {});
         ctx.wait()?;
-        let data = slice
-            .get_mapped_range()
-            .map_err(|e| Error::Gpu(format!("reading back the window's image: {e}")))?;
+        let data = slice.get_mapped_range().map_err(|e| Error::Gpu(format!("reading back the window's image: {e}")))?;
         let bgra = matches!(format, wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb);
         let mut rgb = Vec::with_capacity((self.width * self.height * 3) as usize);
         for row in data.chunks_exact(self.bytes_per_row as usize) {

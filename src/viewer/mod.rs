@@ -130,6 +130,7 @@ pub(crate) fn run(args: ViewArgs) -> Result<(), Failure> {
         camera: FlyCamera::new(camera),
         speed,
         held: HashSet::new(),
+        last_frame: None,
         drag: None,
         turn: (0.0, 0.0),
         script: script.map(VecDeque::from),
@@ -238,6 +239,8 @@ struct Viewer {
     speed: f64,
     /// Movement keys held down.
     held: HashSet<KeyCode>,
+    /// When the last frame began (the time a held key moves for).
+    last_frame: Option<Instant>,
     /// The cursor position of the last drag event while the left button is down.
     drag: Option<(f64, f64)>,
     /// Degrees to turn (right, up) before the next frame, from the mouse.
@@ -281,6 +284,11 @@ impl ApplicationHandler for Viewer {
         let person = self.script.is_none();
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
+            // Keys released while another window had the focus never reach this one.
+            WindowEvent::Focused(false) => {
+                self.held.clear();
+                self.drag = None;
+            }
             WindowEvent::Resized(size) => session.display.resize(session.ctx, size.width, size.height),
             WindowEvent::RedrawRequested => {
                 if let Err(f) = self.frame(event_loop) {
@@ -334,7 +342,8 @@ impl ApplicationHandler for Viewer {
                 if let Some((x, y)) = self.drag {
                     if x.is_finite() {
                         // One pixel turns by one pixel's share of the field of view.
-                        let per_pixel = self.camera.camera.fov_y / session.display.window.inner_size().height.max(1) as f64;
+                        let per_pixel =
+                            self.camera.camera.fov_y / session.display.window.inner_size().height.max(1) as f64;
                         self.turn.0 += (position.x - x) * per_pixel;
                         self.turn.1 -= (position.y - y) * per_pixel;
                     }
@@ -469,13 +478,14 @@ impl Viewer {
             return Ok(());
         }
         // What to do this frame: the script's command, or the person's keys and mouse.
-        let (script_end, mut moved) = if self.script.is_some() {
-            self.follow_script(event_loop)?
-        } else {
-            (None, false)
-        };
+        let (script_end, mut moved) =
+            if self.script.is_some() { self.follow_script(event_loop)? } else { (None, false) };
         if self.script.is_none() {
-            let dt = self.frame_budget.as_secs_f64().max(1.0 / 60.0);
+            // Seconds since the last frame, so that a key held moves at `speed` whatever the
+            // frame rate; at most a quarter of a second, so one slow frame is no jump.
+            let now = Instant::now();
+            let dt = self.last_frame.map_or(0.0, |t| (now - t).as_secs_f64().min(0.25));
+            self.last_frame = Some(now);
             for code in &self.held {
                 if let Some(direction) = movement(*code) {
                     self.camera.translate(direction, self.speed * dt);

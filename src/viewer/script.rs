@@ -34,8 +34,8 @@ pub enum Command {
 /// line (a usage error, exit status 2, before any window opens).
 pub fn load(path: &Path) -> Result<Vec<(usize, Command)>, Error> {
     let bytes = firstshot::files::read_named_input(path)?;
-    let text = String::from_utf8(bytes)
-        .map_err(|_| Error::Usage(format!("--script {}: not UTF-8 text", path.display())))?;
+    let text =
+        String::from_utf8(bytes).map_err(|_| Error::Usage(format!("--script {}: not UTF-8 text", path.display())))?;
     parse(&text, path)
 }
 
@@ -71,9 +71,8 @@ pub fn parse(text: &str, source: &Path) -> Result<Vec<(usize, Command)>, Error> 
             }
             "move" => {
                 arity(3, "move forward|back|left|right|up|down DISTANCE")?;
-                let direction = Direction::parse(words[1]).ok_or_else(|| {
-                    err(format!("\"{}\": expected forward, back, left, right, up or down", words[1]))
-                })?;
+                let direction = Direction::parse(words[1])
+                    .ok_or_else(|| err(format!("\"{}\": expected forward, back, left, right, up or down", words[1])))?;
                 Command::Move(direction, number(2, "a distance in scene units")?)
             }
             "turn" => {
