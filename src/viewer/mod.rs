@@ -147,8 +147,20 @@ pub(crate) fn run(args: ViewArgs) -> Result<(), Failure> {
         && !quiet
     {
         let seconds = s.started.elapsed().as_secs_f64();
+        // The rates past the burn-in, whose steps lack the image stages: what a person sees.
+        let imaging = match s.past_burn_in {
+            Some((at, frames, step)) => {
+                let seconds = at.elapsed().as_secs_f64();
+                format!(
+                    "; past the burn-in {:.1} frames/s, {:.1} steps/s",
+                    (s.frames - frames) as f64 / seconds,
+                    (s.step - step) as f64 / seconds
+                )
+            }
+            None => String::new(),
+        };
         say(&format!(
-            "viewer: {} frames and {} steps in {seconds:.1} s ({:.1} frames/s, {:.1} steps/s) at {}x{} on {}",
+            "viewer: {} frames and {} steps in {seconds:.1} s ({:.1} frames/s, {:.1} steps/s{imaging}) at {}x{} on {}",
             s.frames,
             s.step,
             s.frames as f64 / seconds,
@@ -202,6 +214,8 @@ struct Session {
     step_ms: Option<f64>,
     frames: u64,
     started: Instant,
+    /// When the first frame past the burn-in ended, with the frames and steps then.
+    past_burn_in: Option<(Instant, u64, u32)>,
 }
 
 /// Steps and frames per second over the last second, for the overlay.
@@ -410,6 +424,7 @@ impl Viewer {
             step_ms: None,
             frames: 0,
             started: Instant::now(),
+            past_burn_in: None,
         })
     }
 
@@ -539,6 +554,9 @@ impl Viewer {
         let session = self.session.as_mut().expect("checked above");
         let shot = session.display.frame(session.ctx, lines.as_deref(), self.screenshot.is_some())?;
         session.frames += 1;
+        if session.past_burn_in.is_none() && session.step > session.renderer.burn_in() {
+            session.past_burn_in = Some((Instant::now(), session.frames, session.step));
+        }
         self.rates.count(stepped);
         if let Some(shot) = shot
             && let Some(path) = self.screenshot.take()
