@@ -45,7 +45,7 @@ enum Command {
     Merge(MergeArgs),
     /// Opens a window on the scene (docs/CLI.md, "Viewer"): the image refines while it is
     /// shown; the mouse and keys move the camera.
-    View(viewer::ViewArgs),
+    View(Box<viewer::ViewArgs>),
 }
 
 #[derive(Args)]
@@ -287,7 +287,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Compare { a, b }) => compare(&a, &b),
         Some(Command::Merge(m)) => merge(&m),
-        Some(Command::View(v)) => viewer::run(v),
+        Some(Command::View(v)) => viewer::run(*v),
         None => run(cli.render),
     };
     match result {

@@ -252,11 +252,17 @@ impl Display {
     ) -> Result<Option<Image8>, Error> {
         let frame = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(f) | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
-            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
+            // The window changed size: configure again and draw the next frame.
+            wgpu::CurrentSurfaceTexture::Outdated => {
                 self.surface.configure(&ctx.device, &self.config);
                 return Ok(None);
             }
-            other => return Err(Error::Gpu(format!("the window's next image: {other:?}"))),
+            // Hidden or busy: skip this frame (the steps go on).
+            wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(None),
+            other => {
+                ctx.check()?;
+                return Err(Error::Gpu(format!("the window's surface cannot be drawn on ({other:?})")));
+            }
         };
         let (width, height) = (frame.texture.width(), frame.texture.height());
         let view = frame.texture.create_view(&Default::default());
