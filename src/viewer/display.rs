@@ -35,6 +35,9 @@ fn fs(in: Out) -> @location(0) vec4<f32> {
 }
 "#;
 
+/// Points of the overlay's text: small, so that it covers little of a small window.
+const OVERLAY_TEXT_SIZE: f32 = 10.0;
+
 /// Grey around the image where the window's aspect differs from it.
 const BACKGROUND: wgpu::Color = wgpu::Color { r: 0.05, g: 0.05, b: 0.05, a: 1.0 };
 
@@ -318,7 +321,12 @@ impl Display {
                     ui,
                     |ui| {
                         for line in lines {
-                            ui.label(egui::RichText::new(line).monospace().color(egui::Color32::from_gray(230)));
+                            ui.label(
+                                egui::RichText::new(line)
+                                    .monospace()
+                                    .size(OVERLAY_TEXT_SIZE)
+                                    .color(egui::Color32::from_gray(230)),
+                            );
                         }
                     },
                 );

@@ -131,7 +131,8 @@ pub(crate) fn run(args: ViewArgs) -> Result<(), Failure> {
         speed,
         held: HashSet::new(),
         last_frame: None,
-        drag: None,
+        dragging: false,
+        cursor: None,
         turn: (0.0, 0.0),
         script: script.map(VecDeque::from),
         screenshot: None,
@@ -255,8 +256,10 @@ struct Viewer {
     held: HashSet<KeyCode>,
     /// When the last frame began (the time a held key moves for).
     last_frame: Option<Instant>,
-    /// The cursor position of the last drag event while the left button is down.
-    drag: Option<(f64, f64)>,
+    /// Whether the left button is down (the mouse turns the camera).
+    dragging: bool,
+    /// The cursor's last position in the window, if it has been seen.
+    cursor: Option<(f64, f64)>,
     /// Degrees to turn (right, up) before the next frame, from the mouse.
     turn: (f64, f64),
     /// The script's commands left, with their line numbers; `None`: a person steers.
@@ -301,7 +304,7 @@ impl ApplicationHandler for Viewer {
             // Keys released while another window had the focus never reach this one.
             WindowEvent::Focused(false) => {
                 self.held.clear();
-                self.drag = None;
+                self.dragging = false;
             }
             WindowEvent::Resized(size) => session.display.resize(session.ctx, size.width, size.height),
             WindowEvent::RedrawRequested => {
@@ -319,7 +322,8 @@ impl ApplicationHandler for Viewer {
                             self.held.remove(&code);
                         }
                     }
-                    if !pressed {
+                    // A key held down repeats: only the moves (above) follow it.
+                    if !pressed || event.repeat {
                         return;
                     }
                     let result = match code {
@@ -350,20 +354,18 @@ impl ApplicationHandler for Viewer {
                 }
             }
             WindowEvent::MouseInput { state, button: MouseButton::Left, .. } if person => {
-                self.drag = (state == ElementState::Pressed).then_some((f64::NAN, f64::NAN));
+                self.dragging = state == ElementState::Pressed;
             }
             WindowEvent::CursorMoved { position, .. } if person => {
-                if let Some((x, y)) = self.drag {
-                    if x.is_finite() {
-                        // One pixel turns by one pixel's share of the field of view.
-                        let per_pixel =
-                            self.camera.camera.fov_y / session.display.window.inner_size().height.max(1) as f64;
-                        self.turn.0 += (position.x - x) * per_pixel;
-                        self.turn.1 -= (position.y - y) * per_pixel;
-                    }
-                    self.drag = Some((position.x, position.y));
+                if let (true, Some((x, y))) = (self.dragging, self.cursor) {
+                    // One pixel turns by one pixel's share of the field of view.
+                    let per_pixel = self.camera.camera.fov_y / session.display.window.inner_size().height.max(1) as f64;
+                    self.turn.0 += (position.x - x) * per_pixel;
+                    self.turn.1 -= (position.y - y) * per_pixel;
                 }
+                self.cursor = Some((position.x, position.y));
             }
+            WindowEvent::CursorLeft { .. } => self.cursor = None,
             WindowEvent::MouseWheel { delta, .. } if person => {
                 let notches = match delta {
                     MouseScrollDelta::LineDelta(_, y) => y as f64,
@@ -603,8 +605,9 @@ impl Viewer {
             format!("exposure {exposure:.3} ({:+.1} stops)", self.exposure_stops),
             format!("camera {:.2} {:.2} {:.2}", p.x, p.y, p.z),
             format!("speed {:.3}/s", self.speed),
-            "drag look, WASD QE move, wheel speed".into(),
-            "+/- exposure, P save, C camera, H hide, Esc quit".into(),
+            "drag: look  WASD QE: move  wheel: speed".into(),
+            "+/-: exposure  P: save  C: camera".into(),
+            "H: hide this  Esc: quit".into(),
         ]
     }
 
