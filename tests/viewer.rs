@@ -137,6 +137,73 @@ fn test01_the_screenshot_of_a_scripted_session_is_the_render_of_its_camera() {
     assert_eq!(png_rgb(&dir.join("saved/view_0001.png")).2, shown, "the saved PNG differs from the window");
 }
 
+/// The keyframe lines (position, look_at) of a printed `[camera]` table.
+fn keyframe_of(camera: &str) -> String {
+    let keep: Vec<&str> = camera.lines().filter(|l| l.starts_with("position") || l.starts_with("look_at")).collect();
+    format!("[[keyframes]]\n{}\n", keep.join("\n"))
+}
+
+fn exr_bits(path: &Path) -> Vec<u32> {
+    let image = firstshot::image::Image::read_exr(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    image.pixels.iter().flatten().map(|v| v.to_bits()).collect()
+}
+
+#[test]
+fn test04_a_move_restarts_the_image_but_not_the_state_as_a_walkthrough_frame() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let Some(xvfb_run) = common::xvfb_run() else { return };
+    let dir = Scratch::new("viewer", "move");
+    let scene = common::scenes::shipped("cornell_box");
+    // K image steps at the scene's camera, a move, K more: the second image must be frame 1
+    // of a walkthrough from the scene's camera to the moved one (K steps a frame), whose
+    // state carries on from frame 0. Restarting the state at the move would differ.
+    let script = dir.join("session.txt");
+    std::fs::write(
+        &script,
+        format!("steps {STEPS}\nsave\nmove forward 150\nturn -8 3\nsteps {STEPS}\nsave\nprint-camera\n"),
+    )
+    .unwrap();
+    let adapter = std::env::var("FIRSTSHOT_TEST_ADAPTER").unwrap_or_else(|_| "auto".into());
+    let viewer = Command::new(&xvfb_run)
+        .args(["-a", "-s", "-screen 0 320x240x24", BIN, "view"])
+        .arg(&scene)
+        .args(["--width", "64", "--height", "48", "--adapter", &adapter, "--script"])
+        .arg(&script)
+        .args(["--out", "view.exr"])
+        .args(SMALL)
+        .current_dir(&*dir)
+        .env_remove("WAYLAND_DISPLAY")
+        .env("XDG_RUNTIME_DIR", &*dir)
+        .output()
+        .expect("running xvfb-run");
+    assert_eq!(viewer.status.code(), Some(0), "the viewer under xvfb-run failed: {}", stderr(&viewer));
+    let moved = printed_camera(&stdout(&viewer));
+    // The path: the scene's camera, then the moved one twice, so that frame 1 (at keyframe 1,
+    // the start of the last segment) is the moved camera exactly.
+    let scene_camera = printed_camera(&std::fs::read_to_string(&scene).unwrap());
+    let path =
+        format!("format = 1\n\n{}\n{}\n{}", keyframe_of(&scene_camera), keyframe_of(&moved), keyframe_of(&moved));
+    std::fs::write(dir.join("path.toml"), path).unwrap();
+    let steps = STEPS.to_string();
+    let scene_arg = scene.display().to_string();
+    let args = [
+        &[scene_arg.as_str(), "--path", "path.toml", "--frames", "3", "--steps-per-frame", &steps][..],
+        &["--width", "64", "--height", "48", "--out", "walk", "--quiet", "--adapter", &adapter],
+        &SMALL,
+    ]
+    .concat();
+    let o = firstshot_in(&dir, &args);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    for (view, frame) in [("view_0001.exr", "walk_0000.exr"), ("view_0002.exr", "walk_0001.exr")] {
+        let (a, b) = (exr_bits(&dir.join(view)), exr_bits(&dir.join(frame)));
+        let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+        assert!(differing == 0, "{view} against {frame}: {differing} of {} values differ", a.len());
+    }
+    assert_ne!(exr_bits(&dir.join("view_0001.exr")), exr_bits(&dir.join("view_0002.exr")), "the move changed the view");
+}
+
 #[test]
 fn test02_a_bad_script_is_refused_before_any_window_naming_its_line() {
     let dir = Scratch::new("viewer", "bad-script");
