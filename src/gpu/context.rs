@@ -187,14 +187,17 @@ impl Context {
         wanted: wgpu::Features,
         surface: Option<&wgpu::Surface<'_>>,
     ) -> Result<Context> {
-        let mut adapters = sorted_adapters(instance);
-        if let Some(surface) = surface {
-            adapters.retain(|a| a.is_surface_supported(surface));
-        }
+        let adapters = sorted_adapters(instance);
         let found: Vec<String> = adapters.iter().map(|a| AdapterSummary::of(&a.get_info()).to_string()).collect();
         let mut failures = Vec::new();
+        // Adapters that fit the choice but cannot draw into the window.
+        let mut cannot_present = Vec::new();
         for (_, adapter) in adapters.into_iter().enumerate().filter(|(i, a)| matches(choice, *i, &a.get_info())) {
             let summary = AdapterSummary::of(&adapter.get_info());
+            if surface.is_some_and(|s| !adapter.is_surface_supported(s)) {
+                cannot_present.push(summary.to_string());
+                continue;
+            }
             let desc = wgpu::DeviceDescriptor {
                 label: Some("firstshot.device"),
                 required_features: wanted & adapter.features(),
@@ -228,6 +231,13 @@ impl Context {
         if found.is_empty() {
             return Err(Error::Adapter(format!(
                 "--adapter {choice}: no GPU adapter found; install a Vulkan driver (e.g. Debian's mesa-vulkan-drivers) or an OpenGL/EGL driver"
+            )));
+        }
+        if failures.is_empty() && !cannot_present.is_empty() {
+            return Err(Error::Adapter(format!(
+                "--adapter {choice}: {} cannot draw into the window; found: {}; try another --adapter",
+                cannot_present.join("; "),
+                found.join("; ")
             )));
         }
         if failures.is_empty() {
