@@ -209,6 +209,8 @@ struct Session {
     step: u32,
     /// The running image as last read back, if the current view has one yet.
     image: Option<Image>,
+    /// The image's automatic exposure (`Image::auto_exposure`, as a render's PNG has).
+    auto_exposure: f32,
     /// Whether the texture must be made again from `image` (new steps, a new exposure).
     image_changed: bool,
     /// Measured milliseconds per step (a running mean), for the steps a frame can afford.
@@ -422,6 +424,7 @@ impl Viewer {
             renderer,
             step: 0,
             image: None,
+            auto_exposure: 1.0,
             image_changed: false,
             step_ms: None,
             frames: 0,
@@ -540,7 +543,9 @@ impl Viewer {
             let ms = t.elapsed().as_secs_f64() * 1e3 / stepped.max(1) as f64;
             session.step_ms = Some(session.step_ms.map_or(ms, |m| 0.7 * m + 0.3 * ms));
             if session.step > session.renderer.image_start() {
-                session.image = Some(session.renderer.read_image()?);
+                let image = session.renderer.read_image()?;
+                session.auto_exposure = image.auto_exposure();
+                session.image = Some(image);
                 session.image_changed = true;
             }
         }
@@ -578,7 +583,7 @@ impl Viewer {
     /// Exposure of the display and of saved PNGs: the automatic one of the image (as a
     /// render's PNG has) times 2^stops.
     fn exposure(&self) -> f32 {
-        let auto = self.session.as_ref().and_then(|s| s.image.as_ref()).map_or(1.0, Image::auto_exposure);
+        let auto = self.session.as_ref().filter(|s| s.image.is_some()).map_or(1.0, |s| s.auto_exposure);
         auto * 2f32.powf(self.exposure_stops as f32)
     }
 
