@@ -55,6 +55,18 @@ fn with_camera(scene: &str, camera: &str) -> String {
     format!("{}{camera}\n{}", &scene[..start], &scene[end..])
 }
 
+/// `xvfb-run` starting the viewer on a virtual display of its own. `-a` takes the first free
+/// display number from `-n` on; tests running at once start from numbers of their own
+/// (`slot`), so that two never race for the same free number.
+fn under_xvfb(xvfb_run: &Path, slot: u32) -> Command {
+    let first = 100 + (std::process::id() % 1000) * 4 + slot;
+    let mut c = Command::new(xvfb_run);
+    c.args(["-a", "-n", &first.to_string(), "-s", "-screen 0 320x240x24", BIN, "view"]);
+    // No Wayland session here: winit need not look for one (nor warn about its folder).
+    c.env_remove("WAYLAND_DISPLAY");
+    c
+}
+
 #[test]
 fn test01_the_screenshot_of_a_scripted_session_is_the_render_of_its_camera() {
     if common::gpu().is_none() {
@@ -80,16 +92,13 @@ fn test01_the_screenshot_of_a_scripted_session_is_the_render_of_its_camera() {
     )
     .unwrap();
     let adapter = std::env::var("FIRSTSHOT_TEST_ADAPTER").unwrap_or_else(|_| "auto".into());
-    let viewer = Command::new(&xvfb_run)
-        .args(["-a", "-s", "-screen 0 320x240x24", BIN, "view"])
+    let viewer = under_xvfb(&xvfb_run, 0)
         .arg(&scene)
         .args(["--width", "128", "--height", "128", "--adapter", &adapter, "--script"])
         .arg(&script)
         .args(["--out", "saved/view.exr"])
         .args(SMALL)
         .current_dir(&*dir)
-        // No Wayland session here: winit need not look for one.
-        .env_remove("WAYLAND_DISPLAY")
         .env("XDG_RUNTIME_DIR", &*dir)
         .output()
         .expect("running xvfb-run");
@@ -166,15 +175,13 @@ fn test04_a_move_restarts_the_image_but_not_the_state_as_a_walkthrough_frame() {
     )
     .unwrap();
     let adapter = std::env::var("FIRSTSHOT_TEST_ADAPTER").unwrap_or_else(|_| "auto".into());
-    let viewer = Command::new(&xvfb_run)
-        .args(["-a", "-s", "-screen 0 320x240x24", BIN, "view"])
+    let viewer = under_xvfb(&xvfb_run, 1)
         .arg(&scene)
         .args(["--width", "64", "--height", "48", "--adapter", &adapter, "--script"])
         .arg(&script)
         .args(["--out", "view.exr"])
         .args(SMALL)
         .current_dir(&*dir)
-        .env_remove("WAYLAND_DISPLAY")
         .env("XDG_RUNTIME_DIR", &*dir)
         .output()
         .expect("running xvfb-run");
