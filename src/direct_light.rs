@@ -1,7 +1,9 @@
 //! Per-pixel direct light (docs/ALGORITHM.md 6): the first-shot lights as the image estimate sees
 //! them, and the item buffers of their windows, which give each pixel its own visibility.
 //!
-//! A point light keeps its cube of six faces, rendered once. An area light (or an emitting
+//! A point light keeps its cube of six faces, rendered once, and so does a spot light (its
+//! cone's falloff multiplies its light per pixel). A directional light keeps one parallel
+//! view of the scene along its direction (an orthographic depth map of patch ids). An area light (or an emitting
 //! shape, whose triangles may face different ways: the window is turned to the normal of
 //! the triangle that holds the point) gets a new point y on it every pass, and its window (hemicube or cubic tetrahedron, as `--light-window`) is
 //! rendered again there: pass k takes light triangle k mod T (of its T triangles, so every
@@ -19,15 +21,19 @@
 use crate::first_shot::{self, LightWindow};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{Context, buffers};
-use crate::layout::{GpuDirectLight, GpuWindowFace, LIGHT_AREA, LIGHT_POINT};
+use crate::layout::{GpuDirectLight, GpuWindowFace, LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT};
 use crate::render::RenderOptions;
 use crate::rng::StepRng;
-use crate::scene::{Light, LightSample, PatchKind, Patches, Rgb, SampleKind, Scene};
+use crate::scene::{Light, LightSample, PatchKind, Patches, Rgb, SampleKind, Scene, SpotCone};
 use crate::stages::light_window::WindowAtlas;
 use glam::DVec3;
 
 /// Texels of both atlases together at most (an id and a depth of 4 bytes each: 256 MiB).
 pub const SHADOW_TEXEL_BUDGET: u64 = 1 << 25;
+/// A directional light's parallel view has this many times the side of a cube face (16 times
+/// its texels): its texel is the error of its shadows' outlines (docs/ALGORITHM.md 6), over
+/// the whole scene.
+pub const SUN_VIEW_SCALE: u32 = 4;
 /// The smallest face side the budget may shrink faces to.
 pub const MIN_SHADOW_RESOLUTION: u32 = 8;
 
@@ -50,6 +56,17 @@ const PER_PASS: u32 = 1;
 enum Source {
     Point {
         power: Rgb,
+    },
+    /// Its intensity on the axis, the unit axis and the cone.
+    Spot {
+        intensity: Rgb,
+        axis: DVec3,
+        cone: SpotCone,
+    },
+    /// A sun: its irradiance and the unit direction it travels.
+    Directional {
+        irradiance: Rgb,
+        direction: DVec3,
     },
     /// An area light or an emitting shape (`Patches::emitters`).
     Area {
@@ -80,11 +97,14 @@ pub struct DirectLights {
     kept: WindowAtlas,
     per_pass: WindowAtlas,
     window: LightWindow,
-    /// Pixels along a full face edge, after the memory budget.
+    /// Pixels along a full face edge, after the memory budget (a sun's view: `SUN_VIEW_SCALE`
+    /// times as many).
     pub resolution: u32,
     /// The pass whose points the tables hold.
     prepared: Option<u64>,
     near: f64,
+    /// The scene's bounding sphere (centre, radius), which a directional light's view covers.
+    bounds: (DVec3, f64),
 }
 
 /// Places tiles of (side, rows) texels on shelves at most `width` wide; returns their
@@ -110,12 +130,14 @@ fn point_in_triangle([a, b, c]: [DVec3; 3], u1: f64, u2: f64) -> DVec3 {
     (1.0 - r) * a + r * (1.0 - u2) * b + r * u2 * c
 }
 
-/// A sample at `position` whose window is the source's: a cube for a point light, a window
-/// above `normal` (the normal of the triangle the point lies on) for an area source.
+/// A sample at `position` whose window is the source's: a cube for a point or spot light, a
+/// window above `normal` (the normal of the triangle the point lies on) for an area source,
+/// a parallel view for a directional light.
 fn window_sample(source: &Source, position: DVec3, normal: DVec3) -> LightSample {
-    let kind = match source {
-        Source::Point { .. } => SampleKind::Point,
+    let kind = match *source {
+        Source::Point { .. } | Source::Spot { .. } => SampleKind::Point,
         Source::Area { .. } => SampleKind::AreaVertex { normal },
+        Source::Directional { direction, .. } => SampleKind::Directional { direction },
     };
     LightSample { position, kind, strength: [0.0; 3], weight: 1.0, light: 0 }
 }
@@ -137,6 +159,13 @@ impl DirectLights {
         for (l, light) in scene.lights.iter().enumerate().filter(|_| first_shot) {
             match *light {
                 Light::Point { position, power } => sources.push((Source::Point { power }, position)),
+                Light::Spot { position, direction, intensity, inner_angle, outer_angle } => {
+                    let cone = SpotCone::new(inner_angle, outer_angle);
+                    sources.push((Source::Spot { intensity, axis: direction, cone }, position))
+                }
+                Light::Directional { direction, irradiance } => {
+                    sources.push((Source::Directional { irradiance, direction }, DVec3::ZERO))
+                }
                 Light::Area { vertices, radiance, .. } => {
                     let own: Vec<_> =
                         patches.patches.iter().filter(|p| p.kind == PatchKind::AreaLight { light: l as u32 }).collect();
@@ -166,6 +195,7 @@ impl DirectLights {
             sources.push((Source::Area { radiance: emitter.radiance, shared: true, triangles }, centre));
         }
         let near = buffers.radius * 1e-6;
+        let bounds = (buffers.centre, buffers.radius);
         let max_side = ctx.limits().max_texture_dimension_2d;
         // The face layout at a resolution: (source index, face, atlas) for every face.
         let layout = |r: u32| -> Vec<(usize, first_shot::Face, u32)> {
@@ -173,12 +203,18 @@ impl DirectLights {
                 .iter()
                 .enumerate()
                 .flat_map(|(i, (source, position))| {
-                    let atlas = if matches!(source, Source::Point { .. }) { KEPT } else { PER_PASS };
+                    let atlas = if matches!(source, Source::Area { .. }) { PER_PASS } else { KEPT };
                     let normal = match source {
                         Source::Area { triangles, .. } => triangles[0].1,
-                        Source::Point { .. } => DVec3::ZERO,
+                        _ => DVec3::ZERO,
                     };
-                    first_shot::faces(&window_sample(source, *position, normal), window, r, near)
+                    // A sun's one view spans the whole scene where a cube face spans a quarter
+                    // of a point's surroundings: it gets SUN_VIEW_SCALE times the side.
+                    let side = match source {
+                        Source::Directional { .. } => (SUN_VIEW_SCALE * r).min(max_side),
+                        _ => r,
+                    };
+                    first_shot::faces(&window_sample(source, *position, normal), window, side, near, bounds)
                         .0
                         .into_iter()
                         .map(move |f| (i, f, atlas))
@@ -189,7 +225,7 @@ impl DirectLights {
         let (faces, corners, sizes) = loop {
             let faces = layout(r);
             let tiles = |atlas: u32| -> Vec<(u32, u32)> {
-                faces.iter().filter(|f| f.2 == atlas).map(|f| (r, f.1.rows)).collect()
+                faces.iter().filter(|f| f.2 == atlas).map(|f| (f.1.view.size[0], f.1.rows)).collect()
             };
             let (kept_corners, kept_size) = pack(&tiles(KEPT), max_side);
             let (pass_corners, pass_size) = pack(&tiles(PER_PASS), max_side);
@@ -214,18 +250,27 @@ impl DirectLights {
         for (i, (source, position)) in sources.into_iter().enumerate() {
             let first = faces.iter().position(|f| f.0 == i).unwrap_or(0);
             let count = faces.iter().filter(|f| f.0 == i).count();
-            // A point light's intensity; an area light's point and strength are set per pass.
-            let (kind, strength) = match &source {
+            // A point or spot light's intensity, a sun's irradiance; an area light's point and
+            // strength are set per pass.
+            let v4 = |v: DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
+            let (kind, strength, normal, cone) = match &source {
                 Source::Point { power } => {
                     let k = 1.0 / (4.0 * std::f32::consts::PI);
-                    (LIGHT_POINT, [power[0] * k, power[1] * k, power[2] * k, 0.0])
+                    (LIGHT_POINT, [power[0] * k, power[1] * k, power[2] * k, 0.0], [0.0; 4], [0.0; 4])
                 }
-                Source::Area { .. } => (LIGHT_AREA, [0.0; 4]),
+                Source::Spot { intensity: c, axis, cone } => {
+                    (LIGHT_SPOT, [c[0], c[1], c[2], 0.0], v4(*axis), [cone.scale as f32, cone.offset as f32, 0.0, 0.0])
+                }
+                Source::Directional { irradiance: c, direction } => {
+                    (LIGHT_DIRECTIONAL, [c[0], c[1], c[2], 0.0], v4(*direction), [0.0; 4])
+                }
+                Source::Area { .. } => (LIGHT_AREA, [0.0; 4], [0.0; 4], [0.0; 4]),
             };
             let entry = GpuDirectLight {
-                position: [position.x as f32, position.y as f32, position.z as f32, 0.0],
-                normal: [0.0; 4],
+                position: v4(position),
+                normal,
                 strength,
+                cone,
                 kind,
                 first_face: first as u32,
                 faces: count as u32,
@@ -253,6 +298,7 @@ impl DirectLights {
             resolution: r,
             prepared: None,
             near,
+            bounds,
         };
         let kept_faces = out.faces_in(KEPT);
         if !kept_faces.is_empty() {
@@ -319,7 +365,8 @@ impl DirectLights {
             entry.normal = [normal.x as f32, normal.y as f32, normal.z as f32, pick_area];
             entry.strength = [radiance[0] * weight, radiance[1] * weight, radiance[2] * weight, 0.0];
             let r = self.resolution;
-            let (faces, _) = first_shot::faces(&window_sample(&planned.source, y, normal), self.window, r, self.near);
+            let (faces, _) =
+                first_shot::faces(&window_sample(&planned.source, y, normal), self.window, r, self.near, self.bounds);
             for (slot, face) in self.faces[planned.faces.clone()].iter_mut().zip(faces) {
                 slot.view = face.view.gpu([0.5, 0.5]);
             }

@@ -59,8 +59,16 @@ fn orthonormal_frame(n: DVec3) -> (DVec3, DVec3) {
 }
 
 /// The faces around `sample` at `resolution` pixels per face edge, and the solid angle
-/// of a face's centre pixel (the same for all of them).
-pub(crate) fn faces(sample: &LightSample, window: LightWindow, resolution: u32, near: f64) -> (Vec<Face>, f64) {
+/// of a face's centre pixel (the same for all of them); for a directional light, its one
+/// parallel view of the scene's bounding sphere `bounds` (centre, radius), and the area of
+/// one of its pixels.
+pub(crate) fn faces(
+    sample: &LightSample,
+    window: LightWindow,
+    resolution: u32,
+    near: f64,
+    bounds: (DVec3, f64),
+) -> (Vec<Face>, f64) {
     let view = |forward: DVec3, up: DVec3, tan: f64, centre: [f64; 2]| View {
         eye: sample.position,
         forward,
@@ -69,17 +77,40 @@ pub(crate) fn faces(sample: &LightSample, window: LightWindow, resolution: u32, 
         window_centre: centre,
         size: [resolution, resolution],
         near,
+        orthographic: false,
     };
     let full = |view: View| Face { view, rows: resolution };
     let cube_pixel = 4.0 / (resolution as f64 * resolution as f64);
     match sample.kind {
-        SampleKind::Point => {
+        // A spot light sees through the whole cube, its pixels weighted by the cone's falloff
+        // (zero outside the outer cone): simpler than picking the faces the cone touches,
+        // and as exact.
+        SampleKind::Point | SampleKind::Spot { .. } => {
             let axes = [DVec3::X, -DVec3::X, DVec3::Y, -DVec3::Y, DVec3::Z, -DVec3::Z];
             let faces = axes
                 .iter()
                 .map(|&a| full(view(a, if a.y.abs() > 0.5 { DVec3::Z } else { DVec3::Y }, 1.0, [0.0, 0.0])))
                 .collect();
             (faces, cube_pixel)
+        }
+        SampleKind::Directional { direction } => {
+            // From the plane through the point 2 radii behind the centre, across the whole
+            // bounding sphere: every surface lies at depths between 1 and 3 radii, inside the
+            // linear depth's far distance of 4 radii.
+            let (centre, radius) = bounds;
+            let (up, _) = orthonormal_frame(direction);
+            let face = View {
+                eye: centre - 2.0 * radius * direction,
+                forward: direction,
+                up_hint: up,
+                tan: [radius, radius],
+                window_centre: [0.0, 0.0],
+                size: [resolution, resolution],
+                near: 4.0 * radius,
+                orthographic: true,
+            };
+            let pixel = (2.0 * radius / resolution as f64).powi(2);
+            (vec![full(face)], pixel)
         }
         SampleKind::AreaVertex { normal: n } => {
             let (t1, t2) = orthonormal_frame(n);
@@ -145,7 +176,7 @@ pub fn run(
         let reduce = FirstShotReduce::new(device, buffers, &item_buffer, capacity);
         let mut face_count = 0;
         for (i, sample) in patches.samples.iter().enumerate() {
-            let (faces, pixel) = faces(sample, window, resolution, near);
+            let (faces, pixel) = faces(sample, window, resolution, near, (buffers.centre, buffers.radius));
             for face in &faces {
                 ctx.queue.write_buffer(&item_buffer.camera, 0, bytemuck::bytes_of(&face.view.gpu([0.5, 0.5])));
                 let params =
@@ -163,6 +194,11 @@ pub fn run(
                 * match sample.kind {
                     SampleKind::Point => 1.0 / (4.0 * std::f64::consts::PI),
                     SampleKind::AreaVertex { .. } => sample.weight,
+                    // S_i is the intensity: r_ij = (sum of falloff dOmega_p) / A_j.
+                    SampleKind::Spot { .. } => 1.0,
+                    // S_i is the irradiance: r_ij = (area of the pixels that see j) / A_j,
+                    // i.e. cos(theta) times the share of the patch in the light.
+                    SampleKind::Directional { .. } => 1.0,
                 }
                 / FIXED_POINT_SCALE as f64;
             let append = GpuAppendParams {

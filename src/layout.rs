@@ -25,9 +25,16 @@ pub const FRAGMENT_FRONT_BIT: u32 = 1 << 31;
 pub const PREFIX_SUM_WORKGROUP: u32 = 256;
 pub const PREFIX_SUM_PER_THREAD: u32 = 16;
 /// `LightSample::kind` and `DirectLight::kind`: a point light, or a point on an area light
-/// (a vertex of its mesh in the first shot, a point drawn on it in the direct light).
+/// (a vertex of its mesh in the first shot, a point drawn on it in the direct light), a
+/// spot light or a directional light.
 pub const LIGHT_POINT: u32 = 0;
 pub const LIGHT_AREA: u32 = 1;
+/// A spot light: a point light whose light falls off with its cone (`scene::SpotCone`).
+pub const LIGHT_SPOT: u32 = 2;
+/// A directional light (sun): parallel light, seen through one orthographic view.
+pub const LIGHT_DIRECTIONAL: u32 = 3;
+/// `Camera::size.z`: the view is a parallel (orthographic) projection, not a pinhole.
+pub const VIEW_ORTHOGRAPHIC: u32 = 1;
 /// `Material::kind`: which BRDF a material evaluates (`scene::MaterialKind`). A max-Phong
 /// material without a specular lobe is uploaded as diffuse: it is exactly Lambertian.
 pub const MATERIAL_DIFFUSE: u32 = 0;
@@ -79,13 +86,18 @@ pub struct GpuMaterial {
 pub struct GpuLightSample {
     /// xyz: y_i.
     pub position: [f32; 4],
-    /// xyz: the area light's normal n_L; w: trapezoid weight w_i.
+    /// xyz: the area light's normal n_L, the spot light's axis, the directional light's
+    /// direction of travel; w: trapezoid weight w_i.
     pub normal: [f32; 4],
-    /// rgb: S_i (power of a point light, radiance of an area light).
+    /// rgb: S_i (power of a point light, radiance of an area light, intensity of a spot
+    /// light on its axis, irradiance of a directional light).
     pub strength: [f32; 4],
     /// `LIGHT_*`.
     pub kind: u32,
-    pub _pad: [u32; 3],
+    /// A spot light's cone (`scene::SpotCone`): falloff = clamp(cd scale + offset, 0, 1)^2.
+    pub cone_scale: f32,
+    pub cone_offset: f32,
+    pub _pad: u32,
 }
 
 /// Iteration state of one patch (docs/ALGORITHM.md 2): J_j and the direction win_j it travelled.
@@ -118,12 +130,14 @@ pub struct GpuCamera {
     pub right: [f32; 4],
     /// xyz: unit image up; w: tan(fov_y / 2).
     pub up: [f32; 4],
-    /// xyz: unit view direction; w: near distance of the reversed-z projection.
+    /// xyz: unit view direction; w: near distance of the reversed-z projection (for an
+    /// orthographic view: the far distance of its linear depth 1 - z / far).
     pub forward: [f32; 4],
     /// xy: sample position inside the pixel, each in [0, 1); zw: centre of the view window
     /// in tangent units (0 for a camera; off-centre for the faces of a cubic tetrahedron).
     pub jitter: [f32; 4],
-    /// x: width, y: height in pixels.
+    /// x: width, y: height in pixels; z: `VIEW_ORTHOGRAPHIC` for a parallel projection (then
+    /// `right.w` and `up.w` are the half extents of the view in scene units), else 0.
     pub size: [u32; 4],
 }
 
@@ -140,7 +154,8 @@ pub struct GpuEstimateParams {
     /// 1 when the image gathers (G) as well: the direct light of emitting shapes is then
     /// shared between D and G by multiple importance sampling; 0 for a direct-light image.
     pub mis: u32,
-    pub _pad: u32,
+    /// The image row where this band of the image sum starts (`image_estimate`'s bands).
+    pub first_row: u32,
 }
 
 /// A light as the per-pixel direct light sees it in one pass (docs/ALGORITHM.md 6). WGSL:
@@ -148,13 +163,19 @@ pub struct GpuEstimateParams {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
 pub struct GpuDirectLight {
-    /// xyz: the point light's position, or this pass's point y on the area light.
+    /// xyz: the point or spot light's position, or this pass's point y on the area light
+    /// (unused for a directional light).
     pub position: [f32; 4],
-    /// xyz: the area light's unit normal n_L (zero for a point light).
+    /// xyz: the area light's unit normal n_L, the spot light's axis, the directional light's
+    /// direction of travel (zero for a point light).
     pub normal: [f32; 4],
-    /// rgb: what multiplies V f cos / r^2: a point light's intensity power / (4 pi); for an
-    /// area light, its radiance times the area this pass's point stands for (cos_L too).
+    /// rgb: what multiplies V f cos / r^2: a point light's intensity power / (4 pi), a spot
+    /// light's intensity on its axis (times its falloff); for an area light, its radiance
+    /// times the area this pass's point stands for (cos_L too); what multiplies V f cos for
+    /// a directional light: its irradiance.
     pub strength: [f32; 4],
+    /// x, y: a spot light's cone scale and offset (`scene::SpotCone`); else 0.
+    pub cone: [f32; 4],
     /// `LIGHT_*`.
     pub kind: u32,
     /// The faces of the light's window in the face table: `first_face..first_face + faces`.
@@ -273,11 +294,11 @@ pub fn shared_layouts() -> Vec<StructLayout> {
     vec![
         layout!(GpuPatch => "Patch" { v0, v1, v2, normal, emission, material, flags }),
         layout!(GpuMaterial => "Material" { diffuse, specular, kind }),
-        layout!(GpuLightSample => "LightSample" { position, normal, strength, kind }),
+        layout!(GpuLightSample => "LightSample" { position, normal, strength, kind, cone_scale, cone_offset }),
         layout!(GpuPatchState => "PatchState" { incoming, direction, diffuse, mean_radiance, diffuse_sum }),
         layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),
-        layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count }),
-        layout!(GpuDirectLight => "DirectLight" { position, normal, strength, kind, first_face, faces }),
+        layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count, mis, first_row }),
+        layout!(GpuDirectLight => "DirectLight" { position, normal, strength, cone, kind, first_face, faces }),
         layout!(GpuWindowFace => "WindowFace" { view, tile }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
         layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
@@ -296,6 +317,9 @@ pub fn wgsl_constants() -> String {
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
          const LIGHT_POINT: u32 = {LIGHT_POINT}u;\n\
          const LIGHT_AREA: u32 = {LIGHT_AREA}u;\n\
+         const LIGHT_SPOT: u32 = {LIGHT_SPOT}u;\n\
+         const LIGHT_DIRECTIONAL: u32 = {LIGHT_DIRECTIONAL}u;\n\
+         const VIEW_ORTHOGRAPHIC: u32 = {VIEW_ORTHOGRAPHIC}u;\n\
          const MATERIAL_DIFFUSE: u32 = {MATERIAL_DIFFUSE}u;\n\
          const MATERIAL_PHONG: u32 = {MATERIAL_PHONG}u;\n\
          const PREFIX_SUM_WORKGROUP: u32 = {PREFIX_SUM_WORKGROUP}u;\n\

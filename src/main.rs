@@ -68,7 +68,7 @@ struct MergeArgs {
 
 #[derive(Args)]
 pub(crate) struct RenderArgs {
-    /// The scene file (TOML, docs/SCENE_FORMAT.md).
+    /// The scene file: TOML, or glTF 2.0 (.gltf, .glb) by its extension (docs/SCENE_FORMAT.md).
     #[arg(required_unless_present = "list_adapters")]
     scene: Option<PathBuf>,
     /// Image to write, PATH.exr (linear float RGB), and PATH.png (tonemapped sRGB) beside it;
@@ -84,7 +84,7 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     time: Option<f64>,
     /// Solve the area lights and emitting shapes as emitters inside the iteration instead of
-    /// first shot.
+    /// first shot (refused with point, spot or directional lights).
     #[arg(long)]
     no_first_shot: bool,
     /// Pixels along an edge of each parallel projection of the iteration.
@@ -520,6 +520,10 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     let start = Instant::now();
     // Every check that can refuse comes before any folder is made or file written.
     let mut scene = scene::load(&scene_path)?;
+    // What the scene's files hold but the renderer ignores (docs/SCENE_FORMAT.md).
+    for note in &scene.notes {
+        say.say(format!("note: {note}"));
+    }
     if let Some(name) = &args.camera {
         scene.select_camera(name).map_err(|e| usage(format!("--camera {name}: {e}")))?;
     }

@@ -55,6 +55,9 @@ pub struct RenderOptions {
     /// since the render began, if given. A limit that ends the run before any step reached
     /// the image (shorter than the first shot or the burn-in) gives a direct-light image.
     pub time_limit: Option<std::time::Duration>,
+    /// Rows per band of the image sum; `None`: as many as one storage binding holds
+    /// (`image_estimate::band_rows`). Set only by tests, to check that bands change nothing.
+    pub image_band_rows: Option<u32>,
     /// Initial fragment room of a bundle step; `None` takes the geometric bound, which no
     /// step exceeds. Tests set it small to exercise the overflow-and-redo path.
     pub bundle_capacity: Option<u64>,
@@ -89,6 +92,7 @@ impl RenderOptions {
             first_shot: true,
             time_limit: None,
             bundle_capacity: None,
+            image_band_rows: None,
             shadow_resolution: scene.settings.hemicube_resolution,
             direct_passes: DEFAULT_DIRECT_PASSES,
             burn_in: None,
@@ -274,6 +278,7 @@ pub fn fingerprint(scene: &Scene, options: &RenderOptions) -> u64 {
     options.iterations = 0;
     options.time_limit = None;
     options.bundle_capacity = None;
+    options.image_band_rows = None;
     crate::checkpoint::fnv1a(format!("{scene:?}\n{options:?}").as_bytes())
 }
 
@@ -281,10 +286,18 @@ pub fn fingerprint(scene: &Scene, options: &RenderOptions) -> u64 {
 /// it before opening an adapter, so that such a refusal is a usage error (exit 2) even on a
 /// machine without one.
 pub fn check_options(scene: &Scene, options: &RenderOptions) -> Result<()> {
-    if !options.first_shot && scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Point { .. })) {
-        return Err(Error::Usage(
-            "--no-first-shot: the scene has point lights, which only the first shot can handle (a point has no area to emit from inside the iteration); drop --no-first-shot or replace them by small area lights".into(),
-        ));
+    use crate::scene::Light;
+    // Lights without an area to emit from inside the iteration.
+    let without_area = scene.lights.iter().find_map(|l| match l {
+        Light::Point { .. } => Some("point"),
+        Light::Spot { .. } => Some("spot"),
+        Light::Directional { .. } => Some("directional"),
+        Light::Area { .. } => None,
+    });
+    if let (false, Some(kind)) = (options.first_shot, without_area) {
+        return Err(Error::Usage(format!(
+            "--no-first-shot: the scene has {kind} lights, which only the first shot can handle (a {kind} light has no area to emit from inside the iteration); drop --no-first-shot or replace them by small area lights"
+        )));
     }
     Ok(())
 }
@@ -322,7 +335,10 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
                 "the image {width}x{height} exceeds the device's largest texture side {max_dim}; use a smaller --width/--height"
             )));
         }
-        fit("the image", width as u64 * height as u64 * 16, "use a smaller --width/--height")?;
+        // The image sum is cut into bands of rows, each within one binding
+        // (`image_estimate::band_rows`): only one row must fit.
+        let row = width as u64 * crate::stages::image_estimate::IMAGE_SUM_BYTES_PER_PIXEL;
+        fit("a row of the image", row, "use a smaller --width")?;
     }
     // The stages check these too, but only once the first shot (or the first shot and the
     // bundle buffers) exist: here they are refused before any GPU work, and the bundle's
@@ -562,7 +578,10 @@ impl<'a> Renderer<'a> {
             .map(|NamedCamera { name, camera }| {
                 let item_buffer = CameraItemBuffer::new(device, camera.width, camera.height);
                 let gather = iteration.as_ref().map(|i| &i.gather);
-                let estimate = ImageEstimate::new(device, &buffers, &item_buffer, &direct, gather);
+                let band_rows = options
+                    .image_band_rows
+                    .unwrap_or_else(|| crate::stages::image_estimate::band_rows(&device.limits(), camera.width));
+                let estimate = ImageEstimate::new(device, &buffers, &item_buffer, &direct, gather, band_rows);
                 estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), gathers);
                 ViewImage { name, camera, item_buffer, estimate }
             })
@@ -925,8 +944,9 @@ impl<'a> Renderer<'a> {
         let (device, queue) = (&self.ctx.device, &self.ctx.queue);
         let mut image_sum = Vec::new();
         for view in &self.views {
-            let sum = &view.estimate.image_sum;
-            image_sum.extend(crate::gpu::buffers::read_back::<u8>(device, queue, sum, sum.size())?);
+            for sum in view.estimate.sum_buffers() {
+                image_sum.extend(crate::gpu::buffers::read_back::<u8>(device, queue, sum, sum.size())?);
+            }
         }
         let checkpoint = Checkpoint {
             fingerprint: fingerprint(self.scene, &self.options),
@@ -940,15 +960,15 @@ impl<'a> Renderer<'a> {
     /// Puts a checkpoint's state and image sums on the GPU; returns its step. Its
     /// fingerprint was checked where it was read (`main.rs`); the sizes guard the copies.
     fn restore(&self, c: &Checkpoint) -> Result<u32> {
-        let sums: u64 = self.views.iter().map(|v| v.estimate.image_sum.size()).sum();
+        let sums: u64 = self.views.iter().flat_map(|v| v.estimate.sum_buffers()).map(|b| b.size()).sum();
         if c.state.len() as u64 != self.buffers.state.size() || c.image_sum.len() as u64 != sums {
             return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
         }
         self.ctx.queue.write_buffer(&self.buffers.state, 0, &c.state);
         let mut at = 0;
-        for view in &self.views {
-            let size = view.estimate.image_sum.size() as usize;
-            self.ctx.queue.write_buffer(&view.estimate.image_sum, 0, &c.image_sum[at..at + size]);
+        for sum in self.views.iter().flat_map(|v| v.estimate.sum_buffers()) {
+            let size = sum.size() as usize;
+            self.ctx.queue.write_buffer(sum, 0, &c.image_sum[at..at + size]);
             at += size;
         }
         Ok(c.step)
@@ -983,7 +1003,12 @@ impl<'a> Renderer<'a> {
             (b.clone(), copy)
         };
         let mut kept = vec![backup(&self.buffers.state, "firstshot.render.state_backup")];
-        kept.extend(self.views.iter().map(|v| backup(&v.estimate.image_sum, "firstshot.render.image_backup")));
+        kept.extend(
+            self.views
+                .iter()
+                .flat_map(|v| v.estimate.sum_buffers())
+                .map(|b| backup(b, "firstshot.render.image_backup")),
+        );
         let copy_all = |to_backup: bool| {
             let mut encoder = device.create_command_encoder(&Default::default());
             for (live, copy) in &kept {

@@ -17,6 +17,7 @@ fn scene(camera: Camera, environment: [f32; 3]) -> Scene {
         materials: vec![],
         surfaces: vec![],
         lights: vec![],
+        notes: vec![],
     }
 }
 

@@ -125,10 +125,25 @@ fn test05_an_image_wider_or_taller_than_a_texture_is_refused() {
             &[&format!("{width}x{height}"), "largest texture side 32", "--width/--height"],
         );
     }
-    // Within the texture side but over the buffer that sums the image (16 bytes a pixel).
-    let big = RenderOptions { width: 4096, height: 4096, ..options.clone() };
-    let limits = wgpu::Limits { max_storage_buffer_binding_size: 4096 * 4096 * 16 - 1, ..Default::default() };
-    refused(check_limits(&limits, &patches, &big), &["the image", "--width/--height"]);
+    // Within the texture side, an image sum beyond one binding is cut into bands of rows:
+    // only a row (16 bytes a pixel) must fit one binding (here 1 MiB, a row of 65536).
+    let wide = RenderOptions { width: 65536, height: 4096, ..options.clone() };
+    let texture = 65536;
+    let limits = wgpu::Limits {
+        max_texture_dimension_2d: texture,
+        max_storage_buffer_binding_size: 1 << 20,
+        ..Default::default()
+    };
+    check_limits(&limits, &patches, &wide).expect("one row fits a binding");
+    assert_eq!(firstshot::stages::image_estimate::band_rows(&limits, 65536), 1);
+    let limits = wgpu::Limits {
+        max_texture_dimension_2d: texture,
+        max_storage_buffer_binding_size: (1 << 20) - 1,
+        ..Default::default()
+    };
+    refused(check_limits(&limits, &patches, &wide), &["a row of the image", "--width"]);
+    let limits = wgpu::Limits { max_storage_buffer_binding_size: 128 << 20, ..Default::default() };
+    assert_eq!(firstshot::stages::image_estimate::band_rows(&limits, 7680), 1092, "128 MiB / (7680 x 16 bytes)");
 }
 
 #[test]

@@ -363,11 +363,33 @@ fn test05_many_point_lights_fit_the_shadow_budget() {
         .iter()
         .map(|l| match *l {
             Light::Point { position, power } => (position, None, power[0] as f64 / (4.0 * std::f64::consts::PI)),
-            Light::Area { .. } => unreachable!(),
+            _ => unreachable!(),
         })
         .collect();
     let (o, d) = camera_ray(&scene.camera, 24, 24, 3.5, 3.5);
     let (expected, _, _) = direct_along(&caster, o, d, &lights);
     let ours = rendered.image.at(3, 3)[0] as f64;
     assert!((ours - expected).abs() < 0.03 * expected, "pixel (3, 3): ours {ours}, closed form {expected}");
+}
+
+#[test]
+fn test07_an_image_sum_in_bands_of_rows_is_the_same_bits() {
+    // Images larger than one storage binding sum in bands of rows, each its own buffer and
+    // dispatch (image_estimate::band_rows). A band of 7 rows (the last one short) must give
+    // the sum and the image of one band, bit for bit, with direct passes and gathers.
+    let Some(ctx) = common::gpu() else { return };
+    let scene = scene::load(&common::scenes::shipped("cornell_box")).unwrap();
+    let mut options = RenderOptions::from_scene(&scene);
+    (options.width, options.height) = (40, 30);
+    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, 64, 64);
+    (options.bundle_resolution, options.iterations, options.burn_in) = (64, 12, Some(2));
+    let patches = scene::tessellate(&scene, options.patch_size).unwrap();
+    let whole = render(&ctx, &scene, &patches, &options).unwrap();
+    let banded =
+        render(&ctx, &scene, &patches, &RenderOptions { image_band_rows: Some(7), ..options.clone() }).unwrap();
+    assert_eq!(whole.image_sum.len(), 2 * 40 * 30);
+    let bits = |s: &[[f32; 4]]| s.iter().flat_map(|p| p.map(f32::to_bits)).collect::<Vec<_>>();
+    assert!(bits(&whole.image_sum) == bits(&banded.image_sum), "the banded sum differs");
+    assert!(whole.image_sum.iter().all(|p| p[3] > 0.0), "every pixel of both halves has estimates");
+    assert_eq!(whole.image.pixels, banded.image.pixels);
 }

@@ -513,7 +513,7 @@ fn test15_shape_refusals() {
     refused(&edited(&[(material, "material = \"white\"\ntwo_sided = 1")]), "shapes[0].two_sided");
     assert_contains(
         &refused(&edited(&[(material, "material = \"white\"\ntransform = { scale = 2 }")]), "shapes[0].transform"),
-        "only mesh, box and sierpinski",
+        "only mesh, gltf, box and sierpinski",
     );
     assert_contains(&refused(&edited(&[("type = \"quad\"", "type = \"disc\"")]), "shapes[0].type"), "\"sierpinski\"");
     refused(&edited(&[("type = \"quad\"", "")]), "shapes[0].type");
@@ -602,7 +602,7 @@ fn test16_light_refusals() {
     assert_contains(&message, "blue");
     refused(&light("type = \"point\"\nposition = [0, 1, 0]\npower = [-1, 1, 1]"), "lights[1].power");
     refused(&light("type = \"point\"\nposition = [0, 1, 0]"), "lights[1].power");
-    refused(&light("type = \"spot\"\nposition = [0, 1, 0]"), "lights[1].type");
+    refused(&light("type = \"laser\"\nposition = [0, 1, 0]"), "lights[1].type");
     assert_contains(
         &refused(
             &light("type = \"point\"\nposition = [0, 1, 0]\npower = [1, 1, 1]\nradiance = [1, 1, 1]"),
@@ -842,4 +842,85 @@ proptest! {
         write(&path, &bytes);
         let _ = load(&path);
     }
+}
+
+#[test]
+fn test23_obj_mtl_materials_emission_and_refusals() {
+    let dir = Scratch::new("scene-load", "mtl");
+    write(
+        &dir.join("meshes/lamp.mtl"),
+        "\
+newmtl white
+Kd 0.2 0.2 0.2
+newmtl shade
+Kd 0.5 0.4 0.3
+Ks 0.9 0.9 0.9
+Ns 8
+map_Kd shade.png
+newmtl bulb
+Kd 0 0 0
+Ke 4 3 2
+",
+    );
+    write(
+        &dir.join("meshes/lamp.obj"),
+        "\
+mtllib lamp.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+usemtl shade
+f 1 2 3
+usemtl bulb
+f 1 3 4
+usemtl white
+f 3 2 1
+",
+    );
+    let path = dir.join("scene.toml");
+    let mesh = "[[shapes]]\ntype = \"mesh\"\nfile = \"meshes/lamp.obj\"\n\n[[shapes]]";
+    write(&path, edited(&[("[[shapes]]", mesh)]));
+    let scene = load(&path).unwrap();
+    // The emitting face is a surface of its own, with the bulb's Ke.
+    assert_eq!(scene.surfaces.len(), 3, "{:?}", scene.surfaces.iter().map(|s| &s.origin).collect::<Vec<_>>());
+    let (plain, lit) = (&scene.surfaces[0], &scene.surfaces[1]);
+    assert_eq!(plain.emission, [0.0; 3]);
+    assert_eq!(plain.triangles.len(), 2);
+    assert_eq!(lit.emission, [4.0, 3.0, 2.0]);
+    assert_eq!(lit.triangles.len(), 1);
+    assert_contains(&lit.origin, "emitting");
+    let material = |t: &firstshot::scene::Triangle| &scene.materials[t.material as usize];
+    // `usemtl white` names the scene's [materials] white (0.5), not the library's (0.2).
+    assert_eq!(material(&plain.triangles[1]).kind, MaterialKind::Diffuse { albedo: [0.5; 3] });
+    // Kd 0.5 + Ks 0.9 with Ns 8 would reflect 0.5 + 0.9 * 2 pi / 10 > 1: Ks is scaled to fit.
+    let shade = material(&plain.triangles[0]);
+    assert_eq!(shade.name, "meshes/lamp.obj: shade");
+    let MaterialKind::Phong { diffuse, specular, shininess } = shade.kind else { panic!("{shade:?}") };
+    assert_eq!((diffuse, shininess), ([0.5, 0.4, 0.3], 8.0));
+    assert!(specular[0] < 0.9 && specular[0] > 0.0 && specular[0] == specular[2], "{specular:?}");
+    let albedo = brdf::max_directional_albedo(&shade.kind);
+    assert!(albedo.iter().all(|&a| a <= 1.0) && albedo[0] > 0.9999, "{albedo:?}");
+    // One note for the scaled Ks, one for the texture.
+    assert_eq!(scene.notes.len(), 2, "{:?}", scene.notes);
+    assert!(scene.notes.iter().any(|n| n.contains("Ks scaled by")));
+    assert!(scene.notes.iter().any(|n| n.contains("map_Kd") && n.contains("line 7")));
+
+    // A shape's `emission` key sets every face's, and so one surface.
+    write(&path, edited(&[("[[shapes]]", &mesh.replace("lamp.obj\"", "lamp.obj\"\nemission = [1, 1, 1]"))]));
+    let scene = load(&path).unwrap();
+    assert_eq!(scene.surfaces[0].triangles.len(), 3);
+    assert_eq!(scene.surfaces[0].emission, [1.0; 3]);
+
+    // Refusals name the file and line: a missing library, an unknown material, a bad MTL line.
+    write(&path, edited(&[("[[shapes]]", mesh)]));
+    write(&dir.join("meshes/lamp.obj"), "mtllib nowhere.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl shade\nf 1 2 3\n");
+    assert_contains(&refused_at(load(&path), "meshes/lamp.obj line 1"), "nowhere.mtl does not exist");
+    write(&dir.join("meshes/lamp.obj"), "mtllib lamp.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl gold\nf 1 2 3\n");
+    assert_contains(&refused_at(load(&path), "meshes/lamp.obj line 5"), "unknown material \"gold\"");
+    write(&dir.join("meshes/lamp.mtl"), "newmtl hot\nKd 1.2 0.5 0.5\n");
+    write(&dir.join("meshes/lamp.obj"), "mtllib lamp.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl hot\nf 1 2 3\n");
+    let message = refused_at(load(&path), "lamp.mtl line 1");
+    assert_contains(&message, "Kd must be <= 1");
+    assert_contains(&message, "shapes[0]");
 }

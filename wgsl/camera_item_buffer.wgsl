@@ -6,7 +6,8 @@
 // Target: R32Uint patch index + 1 (NO_PATCH where nothing), Depth32Float reversed-z
 // (greater is nearer, cleared to 0). No culling: a back face is black but still occludes.
 // Invariant: the sample point (pixel + camera.jitter) lands on the rasteriser's pixel
-// centre, so `image_estimate` can rebuild the exact ray of every pixel.
+// centre, so `image_estimate` can rebuild the exact ray of every pixel. The first shot's
+// faces use it too, a directional light's as a parallel projection (`view_clip`).
 // Host: src/stages/camera_item_buffer.rs. Its `SPEC` is the one statement of the bindings
 // (names, kinds, access); tests/kernel_bindings.rs holds it against this file.
 
@@ -19,16 +20,8 @@ struct VertexOut {
 
 @vertex
 fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32) -> VertexOut {
-    let rel = position - camera.eye.xyz;
-    let x = dot(rel, camera.right.xyz);
-    let y = dot(rel, camera.up.xyz);
-    let z = dot(rel, camera.forward.xyz);
-    let size = vec2<f32>(camera.size.xy);
-    // Shift so that the sample point inside the pixel maps to the pixel's centre.
-    let shift = vec2<f32>(2.0 * (0.5 - camera.jitter.x) / size.x, -2.0 * (0.5 - camera.jitter.y) / size.y);
     var out: VertexOut;
-    let window = vec2<f32>(x, y) - camera.jitter.zw * z;
-    out.clip = vec4<f32>(window.x / camera.right.w + shift.x * z, window.y / camera.up.w + shift.y * z, camera.forward.w, z);
+    out.clip = view_clip(camera, position);
     out.patch_id = patch_id;
     return out;
 }

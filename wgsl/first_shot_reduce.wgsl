@@ -1,6 +1,7 @@
 // First-shot reduction (docs/ALGORITHM.md 1). `reduce_face` adds, for every pixel of one face of a
 // light sample's window, the pixel's weight cos^3(theta_p) (times cos(theta_L) for an
-// area-light vertex) to the sum of the patch seen there, if the patch's front faces the
+// area-light vertex, times the cone's falloff for a spot light; 1 for the parallel view of a
+// directional light) to the sum of the patch seen there, if the patch's front faces the
 // sample. `append_sample` then turns each non-zero sum into r_ij and appends the pair
 // (patch, sample, r_ij) to a list, clearing the sum for the next sample.
 //
@@ -36,16 +37,28 @@ fn reduce_face(@builtin(global_invocation_id) gid: vec3<u32>) {
     let j = id - 1u;
     let n = patches[j].normal;
     let s = samples[params.sample];
-    // Only front faces receive: the sample must lie on the front side of the patch's plane.
-    if (dot(n.xyz, s.position.xyz) - n.w <= 0.0) {
-        return;
-    }
-    let v = pixel_direction(face, gid.xy);
-    let len = length(v);
-    // The face's normal is `forward` (unit) at focal distance 1, so cos(theta_p) = 1 / |v|.
-    var weight = 1.0 / (len * len * len);
-    if (s.kind == LIGHT_AREA) {
-        weight *= max(dot(v / len, s.normal.xyz), 0.0);
+    var weight = 1.0;
+    if (s.kind == LIGHT_DIRECTIONAL) {
+        // A parallel projection: every pixel has the same area dP (in the host's factor).
+        // Only front faces receive: the light must travel against the patch's normal.
+        if (dot(n.xyz, s.normal.xyz) >= 0.0) {
+            return;
+        }
+    } else {
+        // Only front faces receive: the sample must lie on the front side of the patch's plane.
+        if (dot(n.xyz, s.position.xyz) - n.w <= 0.0) {
+            return;
+        }
+        let v = pixel_direction(face, gid.xy);
+        let len = length(v);
+        // The face's normal is `forward` (unit) at focal distance 1, so cos(theta_p) = 1 / |v|.
+        weight = 1.0 / (len * len * len);
+        if (s.kind == LIGHT_AREA) {
+            weight *= max(dot(v / len, s.normal.xyz), 0.0);
+        }
+        if (s.kind == LIGHT_SPOT) {
+            weight *= spot_falloff(dot(v / len, s.normal.xyz), s.cone_scale, s.cone_offset);
+        }
     }
     let fixed = u32(min(weight, 1.0) * FIXED_POINT_SCALE + 0.5);
     if (fixed == 0u) {

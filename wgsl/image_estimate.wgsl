@@ -23,6 +23,9 @@
 // `gather`, every step); the image is the sum of their means (the direct light converges
 // in far fewer passes than the indirect, so it is not paid for every step).
 //
+// Each half is a buffer of its own, and each is cut into bands of whole rows, each band a
+// buffer that one binding can hold: the host dispatches every band with its own group 0,
+// binding that band's part of the half as image_sum and its first row in params.
 // Compute, one invocation per pixel: the only writer of its entries of image_sum. Group 1:
 // the direct lights and their window atlases; group 2: this step's bundle, sorted by
 // bundle_transfer.
@@ -83,8 +86,9 @@ fn atlas_id(atlas: u32, at: vec2<i32>) -> u32 {
 }
 
 // Whether the surface `id` (patch index + 1) of a window texel lies on the segment from y to x,
-// x on patch j.
-fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
+// x on patch j. With `by_plane` (a directional light's parallel view), whether the segment
+// crosses that surface's plane: see `visible`.
+fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool) -> bool {
     if (id == NO_PATCH || id - 1u == j || id > params.patch_count) {
         return false;
     }
@@ -97,7 +101,7 @@ fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
     if (side_y * side_x > 0.0 || abs(side_x) <= SEGMENT_EPSILON * length(x - y)) {
         return false;
     }
-    return segment_hits(id - 1u, y, x);
+    return by_plane || segment_hits(id - 1u, y, x);
 }
 
 // The face of a window that holds direction w (from the light toward x): the one whose
@@ -143,13 +147,27 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
 // V(y, x) for the light whose window is faces[first..first + count], x on patch j: 1 unless a
 // surface of the window's item buffer around the direction of x lies on the segment between
 // them. Fields are read one by one: a CPU adapter loads every field of a whole-struct read.
+//
+// A directional light's window is one parallel view (VIEW_ORTHOGRAPHIC) and y is the point
+// of its plane behind the scene from which the light reaches x: the texels are those around
+// x's own projection. There the segment is tested against the planes of the surfaces seen,
+// not their triangles: a sun lights rooms through their tessellated walls and roofs, whose
+// triangle corners poke between texel centres everywhere (with triangles, light leaked
+// through at every mesh vertex: tests/lights.rs test08). A plane the segment crosses blocks;
+// as with a depth map, this may darken x within about one texel of an occluder's outline
+// (where the plane of the occluder seen beside it reaches past its edge), and is exact
+// elsewhere.
 fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     let w = x - y;
     let f = window_face(w, first, count);
     let z = dot(w, faces[f].view.forward.xyz);
     let right = faces[f].view.right;
     let up = faces[f].view.up;
-    let window = vec2<f32>(dot(w, right.xyz), dot(w, up.xyz)) / z - faces[f].view.jitter.zw;
+    var window = vec2<f32>(dot(w, right.xyz), dot(w, up.xyz)) / z - faces[f].view.jitter.zw;
+    if (faces[f].view.size.z == VIEW_ORTHOGRAPHIC) {
+        let rel = x - faces[f].view.eye.xyz;
+        window = vec2<f32>(dot(rel, right.xyz), dot(rel, up.xyz));
+    }
     let ndc = clamp(window / vec2<f32>(right.w, up.w), vec2<f32>(-1.0), vec2<f32>(1.0));
     let side = faces[f].view.size.x;
     let tile = faces[f].tile;
@@ -168,16 +186,17 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     let b = atlas_id(tile.w, origin + vec2<i32>(hi.x, lo.y));
     let c = atlas_id(tile.w, origin + vec2<i32>(lo.x, hi.y));
     let d = atlas_id(tile.w, origin + hi);
-    if (blocks(a, j, y, x)) {
+    let by_plane = faces[f].view.size.z == VIEW_ORTHOGRAPHIC;
+    if (blocks(a, j, y, x, by_plane)) {
         return false;
     }
-    if (b != a && blocks(b, j, y, x)) {
+    if (b != a && blocks(b, j, y, x, by_plane)) {
         return false;
     }
-    if (c != a && c != b && blocks(c, j, y, x)) {
+    if (c != a && c != b && blocks(c, j, y, x, by_plane)) {
         return false;
     }
-    return d == a || d == b || d == c || !blocks(d, j, y, x);
+    return d == a || d == b || d == c || !blocks(d, j, y, x, by_plane);
 }
 
 // Multiple importance sampling of an emitting shape's light (docs/ALGORITHM.md 6): the
@@ -208,16 +227,33 @@ fn emitted_share(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
 fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
     for (var i = 0u; i < params.light_count; i++) {
-        let y = lights[i].position.xyz;
+        let kind = lights[i].kind;
+        var y = lights[i].position.xyz;
+        if (kind == LIGHT_DIRECTIONAL) {
+            // The sun's light reaches x from the plane of its parallel view, straight back
+            // along its direction of travel d.
+            let d = lights[i].normal.xyz;
+            y = x - d * dot(x - faces[lights[i].first_face].view.eye.xyz, d);
+        }
         let to_light = y - x;
         let r2 = dot(to_light, to_light);
-        let w_in = to_light * inverseSqrt(r2);
+        var w_in = to_light * inverseSqrt(r2);
+        if (kind == LIGHT_DIRECTIONAL) {
+            w_in = -lights[i].normal.xyz;
+        }
         let cos_x = dot(n, w_in);
         if (cos_x <= 0.0 || r2 <= 0.0) {
             continue;
         }
         var g = cos_x / r2;
-        if (lights[i].kind == LIGHT_AREA) {
+        if (kind == LIGHT_DIRECTIONAL) {
+            // Irradiance on a surface facing the light: no distance falloff.
+            g = cos_x;
+        }
+        if (kind == LIGHT_SPOT) {
+            g *= spot_falloff(dot(lights[i].normal.xyz, -w_in), lights[i].cone.x, lights[i].cone.y);
+        }
+        if (kind == LIGHT_AREA) {
             let cos_l = max(0.0, dot(lights[i].normal.xyz, -w_in));
             g *= cos_l;
             if (params.mis != 0u && lights[i].normal.w > 0.0) {
@@ -392,10 +428,13 @@ fn seen(pixel: vec2<u32>) -> Seen {
 @compute @workgroup_size(8, 8)
 fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
-    if (gid.x >= size.x || gid.y >= size.y) {
+    // This band's rows: its image_sum holds them alone, from params.first_row on.
+    let xy = vec2<u32>(gid.x, gid.y + params.first_row);
+    let pixel = gid.y * size.x + gid.x;
+    if (gid.x >= size.x || xy.y >= size.y || pixel >= arrayLength(&image_sum)) {
         return;
     }
-    let at = seen(gid.xy);
+    let at = seen(xy);
     var radiance = params.environment.rgb;
     if (at.kind == SEEN_BACK) {
         radiance = vec3<f32>(0.0);
@@ -404,19 +443,21 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
         let m = materials[patches[at.j].material];
         radiance = patches[at.j].emission.rgb + direct_light(at.j, at.x, at.n, m, at.w_out);
     }
-    let pixel = gid.y * size.x + gid.x;
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }
 
 // G: the indirect light gathered through this step's bundle, added to the second half of
-// the image sum.
+// the image sum (bound here as image_sum).
 @compute @workgroup_size(8, 8)
 fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
-    if (gid.x >= size.x || gid.y >= size.y) {
+    // This band's rows: its image_sum holds them alone, from params.first_row on.
+    let xy = vec2<u32>(gid.x, gid.y + params.first_row);
+    let pixel = gid.y * size.x + gid.x;
+    if (gid.x >= size.x || xy.y >= size.y || pixel >= arrayLength(&image_sum)) {
         return;
     }
-    let at = seen(gid.xy);
+    let at = seen(xy);
     var radiance = vec3<f32>(0.0);
     if (at.kind == SEEN_SURFACE) {
         let m = materials[patches[at.j].material];
@@ -427,6 +468,5 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         let incoming = gathered(at.j, at.x, toward, s);
         radiance = 2.0 * PI * incoming * abs(dot(at.n, d)) * brdf(m, at.n, toward, at.w_out);
     }
-    let pixel = size.x * size.y + gid.y * size.x + gid.x;
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }

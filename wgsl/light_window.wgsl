@@ -25,14 +25,10 @@ fn vs_main(
     @location(1) patch_id: u32,
     @builtin(instance_index) face: u32,
 ) -> VertexOut {
-    let view = faces[face].view;
-    let rel = position - view.eye.xyz;
-    let x = dot(rel, view.right.xyz);
-    let y = dot(rel, view.up.xyz);
-    let z = dot(rel, view.forward.xyz);
     var out: VertexOut;
-    let window = vec2<f32>(x, y) - view.jitter.zw * z;
-    out.clip = vec4<f32>(window.x / view.right.w, window.y / view.up.w, view.forward.w, z);
+    // Faces sample their texel centres (jitter 0.5); a directional light's face is a
+    // parallel projection.
+    out.clip = view_clip(faces[face].view, position);
     out.patch_id = patch_id;
     return out;
 }

@@ -120,6 +120,8 @@ pub fn gpu_samples(patches: &Patches) -> Vec<GpuLightSample> {
                 match s.kind {
                     SampleKind::Point => DVec3::ZERO,
                     SampleKind::AreaVertex { normal } => normal,
+                    SampleKind::Spot { axis, .. } => axis,
+                    SampleKind::Directional { direction } => direction,
                 },
                 s.weight,
             ),
@@ -127,8 +129,18 @@ pub fn gpu_samples(patches: &Patches) -> Vec<GpuLightSample> {
             kind: match s.kind {
                 SampleKind::Point => LIGHT_POINT,
                 SampleKind::AreaVertex { .. } => LIGHT_AREA,
+                SampleKind::Spot { .. } => LIGHT_SPOT,
+                SampleKind::Directional { .. } => LIGHT_DIRECTIONAL,
             },
-            _pad: [0; 3],
+            cone_scale: match s.kind {
+                SampleKind::Spot { cone, .. } => cone.scale as f32,
+                _ => 0.0,
+            },
+            cone_offset: match s.kind {
+                SampleKind::Spot { cone, .. } => cone.offset as f32,
+                _ => 0.0,
+            },
+            _pad: 0,
         })
         .collect()
 }

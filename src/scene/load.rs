@@ -24,10 +24,15 @@ const NAMED_CAMERA_KEYS: &[&str] = &["name", "position", "look_at", "up", "fov_y
 const ENVIRONMENT_KEYS: &[&str] = &["radiance"];
 const SETTINGS_KEYS: &[&str] = &["patch_size", "hemicube_resolution", "bundle_resolution", "iterations", "seed"];
 const TRANSFORM_KEYS: &[&str] = &["scale", "rotate", "translate"];
-const SHAPE_TYPES: &str = "\"quad\", \"triangle\", \"mesh\", \"box\" or \"sierpinski\"";
+const SHAPE_TYPES: &str = "\"quad\", \"triangle\", \"mesh\", \"gltf\", \"box\" or \"sierpinski\"";
 
-/// Loads and validates a scene file. Errors name the file, the key and what was expected.
+/// Loads and validates a scene file: TOML, or glTF 2.0 by its extension (`.gltf`, `.glb`).
+/// Errors name the file, the key and what was expected.
 pub fn load(path: &Path) -> Result<Scene> {
+    let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if matches!(extension.as_deref(), Some("gltf" | "glb")) {
+        return super::gltf::load_scene(path);
+    }
     let bytes = crate::files::read_named_input(path)?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let at = e.utf8_error().valid_up_to();
@@ -65,18 +70,27 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
         Some(s) => settings(&s.table()?)?,
         None => Settings::default(),
     };
-    let materials = match root.get("materials") {
+    let mut materials = match root.get("materials") {
         Some(m) => materials(&m.table()?)?,
         None => Vec::new(),
     };
+    // Materials that meshes bring along (MTL libraries, glTF files), appended after the
+    // [materials] ones, and what those files hold that is not rendered.
+    let mut imported = Imported::default();
     let surfaces = match root.get("shapes") {
         Some(s) => {
             let names: HashMap<&str, u32> = materials.iter().zip(0..).map(|(m, i)| (m.name.as_str(), i)).collect();
             let known = Materials { by_name: &names, list: &materials };
-            s.tables("[[shapes]] tables")?.iter().map(|t| shape(t, &known)).collect::<Result<Vec<_>>>()?
+            let mut surfaces = Vec::new();
+            for t in s.tables("[[shapes]] tables")? {
+                surfaces.extend(shape(&t, &known, &mut imported)?);
+            }
+            surfaces
         }
         None => Vec::new(),
     };
+    materials.extend(imported.materials);
+    let notes = imported.notes;
     let lights = match root.get("lights") {
         Some(l) => l.tables("[[lights]] tables")?.iter().map(light).collect::<Result<Vec<_>>>()?,
         None => Vec::new(),
@@ -89,6 +103,8 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
     let emits = lights.iter().any(|l| match l {
         Light::Point { power, .. } => glows(power),
         Light::Area { radiance, .. } => glows(radiance),
+        Light::Directional { irradiance, .. } => glows(irradiance),
+        Light::Spot { intensity, .. } => glows(intensity),
     }) || surfaces.iter().any(|s| glows(&s.emission))
         || glows(&environment);
     if !emits {
@@ -99,7 +115,17 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
         ));
     }
 
-    Ok(Scene { source: source.to_path_buf(), camera, cameras, environment, settings, materials, surfaces, lights })
+    Ok(Scene {
+        source: source.to_path_buf(),
+        camera,
+        cameras,
+        environment,
+        settings,
+        materials,
+        surfaces,
+        lights,
+        notes,
+    })
 }
 
 /// Parses the TOML text, keeping the toml crate's line and column in the key.
@@ -254,8 +280,16 @@ fn materials(t: &Tbl) -> Result<Vec<Material>> {
     Ok(out)
 }
 
+/// What shapes bring in from their files: materials (indexed after `Materials::list`) and
+/// notes about what is not rendered.
+#[derive(Default)]
+pub(super) struct Imported {
+    pub(super) materials: Vec<Material>,
+    pub(super) notes: Vec<String>,
+}
+
 /// The materials a shape may name.
-struct Materials<'a> {
+pub(super) struct Materials<'a> {
     by_name: &'a HashMap<&'a str, u32>,
     list: &'a [Material],
 }
@@ -273,12 +307,13 @@ impl Materials<'_> {
     }
 }
 
-fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
+/// One `[[shapes]]` entry: one surface, or for meshes one per emission their materials give.
+fn shape(t: &Tbl, materials: &Materials, imported: &mut Imported) -> Result<Vec<Surface>> {
     let type_item = t.req("type", SHAPE_TYPES)?;
     let kind = type_item.string()?;
     let specific: &[&str] = match kind {
         "quad" | "triangle" => &["vertices"],
-        "mesh" => &["file", "transform"],
+        "mesh" | "gltf" => &["file", "transform"],
         "box" => &["min", "max", "transform"],
         "sierpinski" => &["center", "size", "level", "transform"],
         other => {
@@ -288,9 +323,10 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
     let mut allowed = vec!["type", "material", "emission", "two_sided"];
     allowed.extend_from_slice(specific);
     if t.table.contains_key("transform") && !allowed.contains(&"transform") {
-        return Err(t
-            .cx
-            .err(t.child("transform"), format!("a {kind} takes no transform (only mesh, box and sierpinski do)")));
+        return Err(t.cx.err(
+            t.child("transform"),
+            format!("a {kind} takes no transform (only mesh, gltf, box and sierpinski do)"),
+        ));
     }
     t.only(&allowed)?;
 
@@ -299,12 +335,13 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
             let name = m.string()?;
             Some(materials.find(name).map_err(|msg| m.err(msg))?)
         }
-        None if kind == "mesh" => None,
+        None if kind == "mesh" || kind == "gltf" => None,
         None => {
             return Err(t.cx.err(t.child("material"), "required: a [materials] name"));
         }
     };
-    let emission = t.get("emission").map_or(Ok([0.0; 3]), |e| e.rgb())?;
+    let emission_key = t.get("emission").map(|e| e.rgb()).transpose()?;
+    let emission = emission_key.unwrap_or([0.0; 3]);
     let two_sided = t.get("two_sided").map_or(Ok(false), |b| b.boolean())?;
     let transform = match t.get("transform") {
         Some(tr) => transform(&tr.table()?)?,
@@ -314,7 +351,7 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
     // falls back.
     let with = |m: u32| move |vertices: [DVec3; 3]| Triangle { vertices, material: m };
 
-    let (origin, triangles) = match kind {
+    let (origin, triangles): (String, Vec<Triangle>) = match kind {
         "quad" | "triangle" => {
             let n = if kind == "quad" { 4 } else { 3 };
             let vertices_item = t.req("vertices", &format!("{n} points"))?;
@@ -357,11 +394,64 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
                 .collect();
             (format!("{} (sierpinski level {level})", t.key), triangles)
         }
+        "gltf" => {
+            let file_item = t.req("file", "the path of a glTF file (.gltf or .glb)")?;
+            let written = file_item.string()?;
+            let path = t.cx.file.parent().map_or_else(|| PathBuf::from(written), |dir| dir.join(written));
+            if !path.is_file() {
+                return Err(file_item.err(format!("glTF file {} does not exist or is not a file", path.display())));
+            }
+            let placement = super::gltf::Placement {
+                transform: glam::DMat4::from_scale_rotation_translation(
+                    transform.scale,
+                    transform.rotation,
+                    transform.translation,
+                ),
+                material,
+                first_material: (materials.list.len() + imported.materials.len()) as u32,
+                origin: format!("{} (gltf \"{written}\")", t.key),
+            };
+            let model = super::gltf::read(&path, &placement)?;
+            imported.materials.extend(model.materials);
+            imported.notes.extend(model.notes);
+            if !model.lights.is_empty() || !model.cameras.is_empty() {
+                imported.notes.push(format!(
+                    "{}: the {} lights and {} cameras of a glTF placed as a shape are ignored: give the TOML scene its own",
+                    t.key,
+                    model.lights.len(),
+                    model.cameras.len()
+                ));
+            }
+            let mut surfaces = model.surfaces;
+            for s in &mut surfaces {
+                s.emission = emission_key.unwrap_or(s.emission);
+                s.two_sided |= two_sided;
+            }
+            return Ok(surfaces);
+        }
         _ => {
             let file_item = t.req("file", "the path of an OBJ file")?;
             let written = file_item.string()?;
-            let triangles = mesh(t, &file_item, written, material, &transform, materials)?;
-            (format!("{} (mesh \"{written}\")", t.key), triangles)
+            let origin = format!("{} (mesh \"{written}\")", t.key);
+            let faces = mesh(t, &file_item, written, material, &transform, materials, imported)?;
+            // Faces that emit (MTL Ke) become surfaces of their own, one per emission; a
+            // shape's `emission` key sets every face's.
+            let mut surfaces: Vec<Surface> = Vec::new();
+            for (triangle, ke) in faces {
+                let emission = emission_key.unwrap_or(ke);
+                match surfaces.iter_mut().find(|s| s.emission == emission) {
+                    Some(s) => s.triangles.push(triangle),
+                    None => {
+                        let origin = if emission == [0.0; 3] {
+                            origin.clone()
+                        } else {
+                            format!("{origin} emitting {}", show_rgb(emission))
+                        };
+                        surfaces.push(Surface { origin, triangles: vec![triangle], emission, two_sided });
+                    }
+                }
+            }
+            return Ok(surfaces);
         }
     };
 
@@ -374,11 +464,12 @@ fn shape(t: &Tbl, materials: &Materials) -> Result<Surface> {
         }
     }
 
-    Ok(Surface { origin, triangles, emission, two_sided })
+    Ok(vec![Surface { origin, triangles, emission, two_sided }])
 }
 
-/// Reads, parses and triangulates an OBJ mesh. Errors inside the file name the mesh file and
-/// `<path as written> line N`.
+/// Reads, parses and triangulates an OBJ mesh: its triangles, each with the emission (MTL
+/// `Ke`) of its material. Errors inside the file name the mesh file and
+/// `<path as written> line N`; inside an MTL library, the library and its line.
 fn mesh(
     t: &Tbl,
     file_item: &Item,
@@ -386,7 +477,8 @@ fn mesh(
     material: Option<u32>,
     transform: &Transform,
     materials: &Materials,
-) -> Result<Vec<Triangle>> {
+    imported: &mut Imported,
+) -> Result<Vec<(Triangle, Rgb)>> {
     let path = t.cx.file.parent().map_or_else(|| PathBuf::from(written), |dir| dir.join(written));
     let bytes = crate::files::read_input(&path).map_err(|e| match e {
         crate::files::ReadError::Io(e) if e.kind() == std::io::ErrorKind::NotFound => {
@@ -402,7 +494,34 @@ fn mesh(
     let at_line = |line: usize, message: String| {
         Error::scene(&path, format!("{written} line {line}"), format!("{message} (mesh of {})", t.key))
     };
-    let obj = shapes::parse_obj(&text, |name| materials.find(name)).map_err(|e| at_line(e.line, e.message))?;
+    let library = mtl_libraries(t, &path, written, &text, &at_line)?;
+    // `usemtl NAME`: a [materials] entry of the scene if there is one by that name (so a
+    // scene can restyle a model), else the libraries' material, imported on first use.
+    let mut emission_of: HashMap<u32, Rgb> = HashMap::new();
+    let base = materials.list.len();
+    let obj = shapes::parse_obj(&text, |name| {
+        if let Ok(index) = materials.find(name) {
+            return Ok(index);
+        }
+        let Some(m) = library.iter().find(|m| m.name == name) else {
+            return Err(match library.is_empty() {
+                true => materials.find(name).unwrap_err(),
+                false => {
+                    format!("unknown material \"{name}\": neither [materials] nor the file's MTL libraries define it")
+                }
+            });
+        };
+        let full_name = format!("{written}: {name}");
+        if let Some(i) = imported.materials.iter().position(|x| x.name == full_name) {
+            return Ok((base + i) as u32);
+        }
+        let index = (base + imported.materials.len()) as u32;
+        imported.materials.push(Material { name: full_name, kind: m.kind });
+        imported.notes.extend(m.notes.iter().map(|n| format!("{} (mesh \"{written}\"): {n}", t.key)));
+        emission_of.insert(index, m.emission);
+        Ok(index)
+    })
+    .map_err(|e| at_line(e.line, e.message))?;
     if obj.faces.is_empty() {
         return Err(file_item.err(format!("mesh file {} has no faces", path.display())));
     }
@@ -421,9 +540,54 @@ fn mesh(
         polygon.extend(obj.face_indices(face).iter().map(|&i| positions[i]));
         shapes::check_polygon(&polygon, POLYGON_PLANARITY)
             .map_err(|p| at_line(face.line, format!("this face is {p}")))?;
-        triangles.extend(shapes::fan(&polygon).map(|vertices| Triangle { vertices, material: m }));
+        let emission = emission_of.get(&m).copied().unwrap_or([0.0; 3]);
+        triangles.extend(shapes::fan(&polygon).map(|vertices| (Triangle { vertices, material: m }, emission)));
     }
     Ok(triangles)
+}
+
+/// Reads the MTL libraries an OBJ file names (`mtllib`), relative to its folder.
+fn mtl_libraries(
+    t: &Tbl,
+    obj_path: &Path,
+    written: &str,
+    text: &str,
+    at_line: &dyn Fn(usize, String) -> Error,
+) -> Result<Vec<super::mtl::MtlMaterial>> {
+    let mut out: Vec<super::mtl::MtlMaterial> = Vec::new();
+    for (line, name) in shapes::obj_material_libraries(text) {
+        let path = obj_path.parent().map_or_else(|| PathBuf::from(&name), |dir| dir.join(&name));
+        let bytes = crate::files::read_input(&path).map_err(|e| {
+            let why = match e {
+                crate::files::ReadError::Io(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                    "does not exist".to_string()
+                }
+                crate::files::ReadError::NotAFile(what) => format!("is {what}"),
+                crate::files::ReadError::Io(e) => format!("cannot be read: {e}"),
+            };
+            at_line(
+                line,
+                format!(
+                    "material library {} {why}: give the MTL file beside the OBJ, or remove the `mtllib` line",
+                    path.display()
+                ),
+            )
+        })?;
+        let mtl = super::mtl::parse_mtl(&String::from_utf8_lossy(&bytes)).map_err(|e| {
+            Error::scene(
+                &path,
+                format!("{name} line {}", e.line),
+                format!("{} (material library of {}, {written})", e.message, t.key),
+            )
+        })?;
+        for m in mtl {
+            // The first library that defines a name wins, as in other OBJ readers.
+            if !out.iter().any(|o| o.name == m.name) {
+                out.push(m);
+            }
+        }
+    }
+    Ok(out)
 }
 
 fn transform(t: &Tbl) -> Result<Transform> {
@@ -450,8 +614,10 @@ fn transform(t: &Tbl) -> Result<Transform> {
     Ok(out)
 }
 
+const LIGHT_TYPES: &str = "\"point\", \"area\", \"directional\" or \"spot\"";
+
 fn light(t: &Tbl) -> Result<Light> {
-    let type_item = t.req("type", "\"point\" or \"area\"")?;
+    let type_item = t.req("type", LIGHT_TYPES)?;
     match type_item.string()? {
         "point" => {
             t.only(&["type", "position", "power"])?;
@@ -474,8 +640,48 @@ fn light(t: &Tbl) -> Result<Light> {
             };
             Ok(Light::Area { vertices, radiance, subdivisions })
         }
-        other => Err(type_item.err(format!("unknown light type \"{other}\": expected \"point\" or \"area\""))),
+        "directional" => {
+            t.only(&["type", "direction", "irradiance"])?;
+            Ok(Light::Directional {
+                direction: unit_direction(&t.req("direction", "3 numbers, the way the light travels")?)?,
+                irradiance: t.req("irradiance", "3 numbers >= 0 (W/m^2 on a surface facing the light)")?.rgb()?,
+            })
+        }
+        "spot" => {
+            t.only(&["type", "position", "direction", "intensity", "inner_angle", "outer_angle"])?;
+            let position = t.req("position", "3 numbers")?.vec3()?;
+            let direction = unit_direction(&t.req("direction", "3 numbers, the spot's axis")?)?;
+            let intensity = t.req("intensity", "3 numbers >= 0 (W/sr on the axis)")?.rgb()?;
+            // glTF KHR_lights_punctual's defaults and bounds: 0 <= inner < outer <= 90 degrees.
+            let angle = |key: &str, default: f64| -> Result<f64> {
+                let Some(item) = t.get(key) else { return Ok(default) };
+                let degrees = item.number()?;
+                if !(0.0..=90.0).contains(&degrees) {
+                    return Err(item.err(format!("must be from 0 to 90 (degrees from the axis), got {degrees}")));
+                }
+                Ok(degrees)
+            };
+            let inner_angle = angle("inner_angle", 0.0)?;
+            let outer_angle = angle("outer_angle", 45.0)?;
+            if inner_angle >= outer_angle {
+                return Err(t.cx.err(
+                    t.child("inner_angle"),
+                    format!(
+                        "must be less than outer_angle ({outer_angle} degrees{}), got {inner_angle}",
+                        if t.get("outer_angle").is_some() { "" } else { ", its default" }
+                    ),
+                ));
+            }
+            Ok(Light::Spot { position, direction, intensity, inner_angle, outer_angle })
+        }
+        other => Err(type_item.err(format!("unknown light type \"{other}\": expected {LIGHT_TYPES}"))),
     }
+}
+
+/// A direction: 3 numbers, not all zero, normalised.
+fn unit_direction(item: &Item) -> Result<DVec3> {
+    let v = item.vec3()?;
+    v.try_normalize().ok_or_else(|| item.err("must not be zero: it is a direction"))
 }
 
 /// The file being read, for errors.

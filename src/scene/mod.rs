@@ -7,7 +7,9 @@
 pub mod brdf;
 pub mod camera_path;
 pub mod contact;
+pub mod gltf;
 pub mod load;
+pub mod mtl;
 pub mod shapes;
 pub mod tessellate;
 
@@ -38,6 +40,9 @@ pub struct Scene {
     /// Every `[[shapes]]` entry, already turned into triangles in scene space.
     pub surfaces: Vec<Surface>,
     pub lights: Vec<Light>,
+    /// What the loader read but does not render (a glTF texture, an MTL transparency, a
+    /// Ks scaled down to conserve energy): one line each, printed as `note: ...`.
+    pub notes: Vec<String>,
 }
 
 /// A pinhole camera (right-handed; image right = normalize(forward x up)).
@@ -140,4 +145,41 @@ pub enum Light {
     Point { position: DVec3, power: Rgb },
     /// One-sided diffuse planar convex quad, meshed into `subdivisions` x `subdivisions` cells.
     Area { vertices: [DVec3; 4], radiance: Rgb, subdivisions: u32 },
+    /// A sun: parallel light travelling along `direction` (unit), of `irradiance` on a
+    /// surface facing it (E = irradiance cos theta on one at angle theta).
+    Directional { direction: DVec3, irradiance: Rgb },
+    /// A point light at `position` whose intensity (W/sr) is `intensity` on its axis
+    /// `direction` (unit) and falls off with the glTF KHR_lights_punctual cone between
+    /// `inner_angle` and `outer_angle` (degrees from the axis, 0 <= inner < outer <= 90):
+    /// `SpotCone`.
+    Spot { position: DVec3, direction: DVec3, intensity: Rgb, inner_angle: f64, outer_angle: f64 },
+}
+
+/// A spot light's cone as glTF KHR_lights_punctual defines its falloff: with cd the cosine
+/// of the angle between the spot's axis and the direction to the lit point,
+///
+///     factor = clamp(cd * scale + offset, 0, 1)^2,
+///     scale = 1 / max(0.001, cos(inner) - cos(outer)),  offset = -cos(outer) * scale,
+///
+/// 1 inside the inner cone, 0 outside the outer one, smooth between.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpotCone {
+    /// 1 / max(0.001, cos(inner) - cos(outer)).
+    pub scale: f64,
+    /// -cos(outer) scale.
+    pub offset: f64,
+}
+
+impl SpotCone {
+    /// The cone between `inner` and `outer` (degrees from the axis).
+    pub fn new(inner_angle: f64, outer_angle: f64) -> SpotCone {
+        let (cos_inner, cos_outer) = (inner_angle.to_radians().cos(), outer_angle.to_radians().cos());
+        let scale = 1.0 / (cos_inner - cos_outer).max(0.001);
+        SpotCone { scale, offset: -cos_outer * scale }
+    }
+
+    /// The falloff factor for a direction at cosine `cd` to the axis.
+    pub fn falloff(&self, cd: f64) -> f64 {
+        (cd * self.scale + self.offset).clamp(0.0, 1.0).powi(2)
+    }
 }

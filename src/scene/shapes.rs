@@ -333,6 +333,20 @@ pub fn parse_obj(text: &str, mut material: impl FnMut(&str) -> Result<u32, Strin
     Ok(obj)
 }
 
+/// The `mtllib` statements of an OBJ file: (line, file name) for each library it names, in
+/// order. Read before the faces, so that `usemtl` can name the libraries' materials.
+pub fn obj_material_libraries(text: &str) -> Vec<(usize, String)> {
+    let mut out = Vec::new();
+    for (index, raw) in text.lines().enumerate() {
+        let content = raw.split('#').next().unwrap_or("");
+        let mut tokens = content.split_whitespace();
+        if tokens.next() == Some("mtllib") {
+            out.extend(tokens.map(|name| (index + 1, name.to_string())));
+        }
+    }
+    out
+}
+
 fn obj_number(token: &str) -> Result<f64, String> {
     let x: f64 = token.parse().map_err(|_| format!("expected a number, got `{token}`"))?;
     if !x.is_finite() || x.abs() > MAX_COORDINATE {

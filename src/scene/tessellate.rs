@@ -13,7 +13,7 @@
 //! of its own (`emitter_grid` says how fine), up to `MAX_EMITTER_SAMPLES` for the scene.
 
 use super::contact::{Pieces, contact_pieces};
-use super::{Light, Rgb, Scene, Triangle};
+use super::{Light, Rgb, Scene, SpotCone, Triangle};
 use crate::{Error, Result};
 use glam::DVec3;
 use std::collections::HashMap;
@@ -73,7 +73,8 @@ pub struct Patch {
 pub struct LightSample {
     pub position: DVec3,
     pub kind: SampleKind,
-    /// S_i: the power of a point light, the radiance of an area light.
+    /// S_i: the power of a point light, the radiance of an area light, the intensity of a
+    /// spot light on its axis, the irradiance of a directional light.
     pub strength: Rgb,
     /// w_i: for an area-light vertex, (area of the light triangles sharing it) / 3; 1 for a
     /// point light.
@@ -92,6 +93,13 @@ pub enum SampleKind {
     /// an emitting triangle's grid (with the cell's area), and that surface's unit normal: a
     /// window above it, S_i = radiance, the weight in `LightSample::weight`.
     AreaVertex { normal: DVec3 },
+    /// A spot light: a point light's full cube window whose pixels count with the cone's
+    /// falloff (`SpotCone`) about the unit `axis`; S_i = its intensity on the axis (W/sr).
+    Spot { axis: DVec3, cone: SpotCone },
+    /// A directional light (sun) travelling along the unit `direction`: one parallel
+    /// projection along it over the scene's bounding sphere; S_i = its irradiance. Its
+    /// `LightSample::position` means nothing (the origin) and is left out of the bounds.
+    Directional { direction: DVec3 },
 }
 
 /// The tessellated scene.
@@ -217,7 +225,7 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
         .lights
         .iter()
         .map(|light| match *light {
-            Light::Point { .. } => 1,
+            Light::Point { .. } | Light::Directional { .. } | Light::Spot { .. } => 1,
             Light::Area { subdivisions, .. } => (subdivisions as usize + 1).pow(2),
         })
         .sum();
@@ -261,6 +269,20 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
             Light::Area { vertices, radiance, subdivisions } => {
                 mesh_area_light(scene, l, vertices, radiance, subdivisions, &mut out)?
             }
+            Light::Spot { position, direction, intensity, inner_angle, outer_angle } => out.samples.push(LightSample {
+                position,
+                kind: SampleKind::Spot { axis: direction, cone: SpotCone::new(inner_angle, outer_angle) },
+                strength: intensity,
+                weight: 1.0,
+                light: l as u32,
+            }),
+            Light::Directional { direction, irradiance } => out.samples.push(LightSample {
+                position: DVec3::ZERO,
+                kind: SampleKind::Directional { direction },
+                strength: irradiance,
+                weight: 1.0,
+                light: l as u32,
+            }),
         }
     }
     for (e, emitter) in plan.emitters.into_iter().enumerate() {
@@ -315,7 +337,8 @@ fn plan_emitters(scene: &Scene, patch_size: f64) -> Result<EmitterPlan> {
     let mut sides = Vec::new();
     for (s, surface) in scene.surfaces.iter().enumerate() {
         let mean = surface.emission.iter().map(|&c| c as f64).sum::<f64>() / 3.0;
-        if !(mean > 0.0) {
+        // Emission is checked >= 0 and finite on loading: a mean of 0 is the only non-emitter.
+        if mean <= 0.0 {
             continue;
         }
         for (t, triangle) in surface.triangles.iter().enumerate() {
@@ -415,10 +438,14 @@ fn emitter_samples(emitter: &Emitter, light: u32, samples: &mut Vec<LightSample>
     }
 }
 
-/// The bounding sphere of every patch vertex and light sample: the centre of their
-/// axis-aligned box and the distance from it to the farthest point. `(0, 0)` when empty.
+/// The bounding sphere of every patch vertex and light sample (but a directional light's,
+/// which has no position): the centre of their axis-aligned box and the distance from it to
+/// the farthest point. `(0, 0)` when empty.
 pub fn scene_bounds(patches: &Patches) -> (DVec3, f64) {
-    let points = || patches.patches.iter().flat_map(|p| p.vertices).chain(patches.samples.iter().map(|s| s.position));
+    let placed = |s: &&LightSample| !matches!(s.kind, SampleKind::Directional { .. });
+    let points = || {
+        patches.patches.iter().flat_map(|p| p.vertices).chain(patches.samples.iter().filter(placed).map(|s| s.position))
+    };
     let (lo, hi) = points()
         .fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(p), hi.max(p)));
     if lo.x > hi.x {
@@ -620,6 +647,7 @@ pub(crate) mod tests {
             materials: vec![Material { name: "white".into(), kind: MaterialKind::Diffuse { albedo: [0.5; 3] } }],
             surfaces,
             lights,
+            notes: Vec::new(),
         }
     }
 

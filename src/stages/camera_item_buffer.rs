@@ -2,7 +2,7 @@
 
 use crate::gpu::bindings::{Kernel, KernelSpec, fragment, uniform, vertex};
 use crate::gpu::buffers;
-use crate::layout::{GpuCamera, RasterVertex};
+use crate::layout::{GpuCamera, RasterVertex, VIEW_ORTHOGRAPHIC};
 use crate::scene::Camera;
 use glam::DVec3;
 
@@ -30,11 +30,13 @@ pub fn gpu_camera(camera: &Camera, width: u32, height: u32, near: f64, jitter: [
         window_centre: [0.0, 0.0],
         size: [width, height],
         near,
+        orthographic: false,
     }
     .gpu(jitter)
 }
 
-/// A pinhole view: a camera, or one face of a light sample's window.
+/// A pinhole view (a camera, or one face of a light sample's window), or a parallel one (a
+/// directional light's window).
 #[derive(Debug, Clone, Copy)]
 pub struct View {
     pub eye: DVec3,
@@ -42,12 +44,16 @@ pub struct View {
     pub forward: DVec3,
     /// Made orthogonal to `forward` to give the image's up.
     pub up_hint: DVec3,
-    /// Half extents of the view window at focal distance 1.
+    /// Half extents of the view window at focal distance 1 (orthographic: in scene units).
     pub tan: [f64; 2],
     /// Centre of the view window in (right, up) coordinates at focal distance 1.
     pub window_centre: [f64; 2],
     pub size: [u32; 2],
+    /// The near distance of the reversed-z projection; for an orthographic view, the far
+    /// distance of its linear depth 1 - z / far (every surface must lie within it).
     pub near: f64,
+    /// A parallel projection along `forward` from the plane through `eye`.
+    pub orthographic: bool,
 }
 
 impl View {
@@ -63,7 +69,7 @@ impl View {
             up: f(up, self.tan[1]),
             forward: f(forward, self.near),
             jitter: [jitter[0], jitter[1], self.window_centre[0] as f32, self.window_centre[1] as f32],
-            size: [self.size[0], self.size[1], 0, 0],
+            size: [self.size[0], self.size[1], if self.orthographic { VIEW_ORTHOGRAPHIC } else { 0 }, 0],
         }
     }
 }

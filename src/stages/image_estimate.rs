@@ -25,8 +25,10 @@ pub const SPEC: KernelSpec = KernelSpec {
             uint_texture("item_buffer"),
             read::<GpuPatch>("patches"),
             read::<GpuMaterial>("materials"),
-            // Two halves (Le + D, G) of rgb sum, w count per pixel; one pixel per
-            // invocation: no race.
+            // One half of the image sum, rgb sum and w count per pixel: Le + D for the
+            // `direct` entry point, G for `gather` (each half its own buffer, bound in its
+            // own group 0, so that each needs only 16 bytes a pixel of one binding). One
+            // pixel per invocation: no race.
             read_write::<[f32; 4]>("image_sum"),
         ],
         // The direct light (`direct_light::DirectLights`).
@@ -51,57 +53,87 @@ pub const SPEC: KernelSpec = KernelSpec {
     ],
 };
 
+/// The bytes per pixel of each half of the image sum (vec4<f32>: rgb sum, w count).
+pub const IMAGE_SUM_BYTES_PER_PIXEL: u64 = 16;
+
+/// Rows per band of the image sum for an image `width` pixels wide: as many as one storage
+/// binding (and one buffer) of the device holds, so an image of any size within the
+/// device's memory is summed, in as few dispatches as the limit allows.
+pub fn band_rows(limits: &wgpu::Limits, width: u32) -> u32 {
+    let most = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+    let rows = most / (u64::from(width.max(1)) * IMAGE_SUM_BYTES_PER_PIXEL);
+    rows.clamp(1, u64::from(u32::MAX)) as u32
+}
+
+/// One band of whole image rows: its part of both halves of the image sum, each a buffer
+/// that one storage binding can hold, and the parameters that say where it starts.
+struct Band {
+    first_row: u32,
+    rows: u32,
+    params: wgpu::Buffer,
+    /// Le + D, then G.
+    sums: [wgpu::Buffer; 2],
+    /// Group 0 for `direct` (binding `sums[0]`) and for `gather` (`sums[1]`).
+    groups: [wgpu::BindGroup; 2],
+}
+
 /// Pipelines, parameters and the image sum (two halves of vec4<f32> per pixel: rgb sum,
-/// w count; Le + D, then G).
+/// w count; Le + D, then G), in bands of rows so that no binding exceeds the device's limit.
 pub struct ImageEstimate {
     built: Kernel,
     direct_pipeline: wgpu::ComputePipeline,
     gather_pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
+    bands: Vec<Band>,
     direct_group: wgpu::BindGroup,
     gather_group: wgpu::BindGroup,
-    pub params: wgpu::Buffer,
-    pub image_sum: wgpu::Buffer,
     width: u32,
     height: u32,
 }
 
 impl ImageEstimate {
     /// `gather`: the bundle buffers of the iteration, or `None` for direct-light-only passes.
+    /// `band_rows`: rows per band of the image sum (`band_rows`, or fewer to test the bands).
     pub fn new(
         device: &wgpu::Device,
         scene: &SceneBuffers,
         camera: &CameraItemBuffer,
         direct: &DirectLights,
         gather: Option<&GatherBuffers>,
+        band_rows: u32,
     ) -> Self {
         let built = SPEC.build(device);
         let direct_pipeline = built.compute_pipeline(device, "direct");
         let gather_pipeline = built.compute_pipeline(device, "gather");
-        let params = buffers::uniform(
-            device,
-            "firstshot.image_estimate.params",
-            &<GpuEstimateParams as bytemuck::Zeroable>::zeroed(),
-        );
-        let pixels = camera.width as u64 * camera.height as u64;
-        let image_sum = buffers::storage_zeroed(
-            device,
-            "firstshot.image_estimate.image_sum",
-            2 * pixels * 16,
-            wgpu::BufferUsages::COPY_SRC,
-        );
-        let bind_group = built.bind_group(
-            device,
-            0,
-            &[
-                ("camera", (&camera.camera).into()),
-                ("params", (&params).into()),
-                ("item_buffer", (&camera.ids_view).into()),
-                ("patches", (&scene.patches).into()),
-                ("materials", (&scene.materials).into()),
-                ("image_sum", (&image_sum).into()),
-            ],
-        );
+        let band_rows = band_rows.max(1);
+        let bands = (0..camera.height)
+            .step_by(band_rows as usize)
+            .map(|first_row| {
+                let rows = band_rows.min(camera.height - first_row);
+                let params = buffers::uniform(
+                    device,
+                    "firstshot.image_estimate.params",
+                    &GpuEstimateParams { first_row, ..bytemuck::Zeroable::zeroed() },
+                );
+                let bytes = camera.width as u64 * rows as u64 * IMAGE_SUM_BYTES_PER_PIXEL;
+                let sums = ["firstshot.image_estimate.direct_sum", "firstshot.image_estimate.gather_sum"]
+                    .map(|label| buffers::storage_zeroed(device, label, bytes, wgpu::BufferUsages::COPY_SRC));
+                let groups = [0, 1].map(|half| {
+                    built.bind_group(
+                        device,
+                        0,
+                        &[
+                            ("camera", (&camera.camera).into()),
+                            ("params", (&params).into()),
+                            ("item_buffer", (&camera.ids_view).into()),
+                            ("patches", (&scene.patches).into()),
+                            ("materials", (&scene.materials).into()),
+                            ("image_sum", (&sums[half]).into()),
+                        ],
+                    )
+                });
+                Band { first_row, rows, params, sums, groups }
+            })
+            .collect();
         let direct_group = built.bind_group(
             device,
             1,
@@ -117,11 +149,9 @@ impl ImageEstimate {
             built,
             direct_pipeline,
             gather_pipeline,
-            bind_group,
+            bands,
             direct_group,
             gather_group,
-            params,
-            image_sum,
             width: camera.width,
             height: camera.height,
         }
@@ -167,19 +197,27 @@ impl ImageEstimate {
     /// Records one estimate of every pixel's emission and direct light, Le + D (reads the
     /// camera item buffer and the light windows of this pass).
     pub fn record_direct(&self, encoder: &mut wgpu::CommandEncoder) {
-        self.record(encoder, "direct", &self.direct_pipeline);
+        self.record(encoder, "direct", &self.direct_pipeline, 0);
     }
 
     /// Records one estimate of every pixel's indirect light G, gathered through this step's
     /// bundle (reads the camera item buffer of this pass).
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
-        self.record(encoder, "gather", &self.gather_pipeline);
+        self.record(encoder, "gather", &self.gather_pipeline, 1);
     }
 
-    fn record(&self, encoder: &mut wgpu::CommandEncoder, entry: &str, pipeline: &wgpu::ComputePipeline) {
-        let groups = SPEC.grid(entry, [self.width, self.height]);
-        let bind_groups = [&self.bind_group, &self.direct_group, &self.gather_group];
-        kernel::dispatch(encoder, "firstshot.image_estimate.pass", pipeline, &bind_groups, groups);
+    fn record(&self, encoder: &mut wgpu::CommandEncoder, entry: &str, pipeline: &wgpu::ComputePipeline, half: usize) {
+        for band in &self.bands {
+            let groups = SPEC.grid(entry, [self.width, band.rows]);
+            let bind_groups = [&band.groups[half], &self.direct_group, &self.gather_group];
+            kernel::dispatch(encoder, "firstshot.image_estimate.pass", pipeline, &bind_groups, groups);
+        }
+    }
+
+    /// The buffers of the image sum in the order of `read_sum`: the first half's bands from
+    /// the top, then the second half's (checkpoints keep and restore them in this order).
+    pub fn sum_buffers(&self) -> impl Iterator<Item = &wgpu::Buffer> {
+        (0..2).flat_map(move |half| self.bands.iter().map(move |b| &b.sums[half]))
     }
 
     /// What the estimate adds where no surface is, how many direct lights it evaluates, and
@@ -193,26 +231,34 @@ impl ImageEstimate {
         light_count: u32,
         mis: bool,
     ) {
-        let params = GpuEstimateParams {
-            environment: [environment[0], environment[1], environment[2], 0.0],
-            patch_count,
-            light_count,
-            mis: mis as u32,
-            _pad: 0,
-        };
-        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        for band in &self.bands {
+            let params = GpuEstimateParams {
+                environment: [environment[0], environment[1], environment[2], 0.0],
+                patch_count,
+                light_count,
+                mis: mis as u32,
+                first_row: band.first_row,
+            };
+            queue.write_buffer(&band.params, 0, bytemuck::bytes_of(&params));
+        }
     }
 
     /// Clears the running sum.
     pub fn clear(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.clear_buffer(&self.image_sum, 0, None);
+        for sum in self.sum_buffers() {
+            encoder.clear_buffer(sum, 0, None);
+        }
     }
 
     /// Reads the image sum back (its two halves, Le + D then G, of rgb sum and w the number
     /// of estimates per pixel, each row by row from the top).
     pub fn read_sum(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<[f32; 4]>> {
-        let pixels = self.width as u64 * self.height as u64;
-        buffers::read_back(device, queue, &self.image_sum, 2 * pixels * 16)
+        let mut sum = Vec::with_capacity(2 * self.width as usize * self.height as usize);
+        for (buffer, band) in self.sum_buffers().zip(self.bands.iter().chain(&self.bands)) {
+            let bytes = self.width as u64 * band.rows as u64 * IMAGE_SUM_BYTES_PER_PIXEL;
+            sum.extend(buffers::read_back::<[f32; 4]>(device, queue, buffer, bytes)?);
+        }
+        Ok(sum)
     }
 
     /// Reads the image back, row by row from the top (`image_of_sums`).

@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 pub mod bin;
+pub mod gltf_writer;
 pub mod ray_caster;
 pub mod scenes;
 pub mod scratch;
@@ -179,6 +180,7 @@ pub fn bare_scene() -> firstshot::scene::Scene {
         materials: vec![],
         surfaces: vec![],
         lights: vec![],
+        notes: vec![],
     }
 }
 

@@ -317,6 +317,10 @@ def mitsuba_dict(path, mesh_dir, width=None, height=None, spp=64, max_depth=-1, 
         elif light["type"] == "area":
             quad = [[float(x) for x in v] for v in light["vertices"]]
             add_mesh(f"light{i}", fan(quad), None, False, light["radiance"])
+        elif light["type"] in ("directional", "spot"):
+            # Not converted: Mitsuba's spot falls off differently from glTF's cone, and no
+            # reference uses either light yet.
+            raise ConvertError(f"lights[{i}]: {light['type']} lights are not converted to Mitsuba")
         else:
             raise ConvertError(f"lights[{i}]: unknown light type {light['type']!r}")
     return out

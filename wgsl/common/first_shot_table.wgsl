@@ -8,7 +8,8 @@
 @group(1) @binding(2) var<storage, read> samples: array<LightSample>;
 @group(1) @binding(3) var<storage, read> fs_irradiance: array<vec4<f32>>; // sum_i S_i r_ij
 
-// Lfs_j(x, w_out) = sum_i S_i r_ij f_j(w'_i(x), x, w_out), w'_i(x) from y_i to x.
+// Lfs_j(x, w_out) = sum_i S_i r_ij f_j(w'_i(x), x, w_out), w'_i(x) from y_i to x (a
+// directional light's own direction of travel).
 fn first_shot_radiance(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
     if (dot(n, w_out) <= 0.0) {
         return vec3<f32>(0.0);
@@ -22,7 +23,10 @@ fn first_shot_radiance(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: v
     for (var e = fs_offsets[j]; e < fs_offsets[j + 1u]; e++) {
         let entry = fs_entries[e];
         let s = samples[entry.x];
-        let w_in = normalize(s.position.xyz - x);
+        var w_in = normalize(s.position.xyz - x);
+        if (s.kind == LIGHT_DIRECTIONAL) {
+            w_in = -s.normal.xyz;
+        }
         sum += s.strength.rgb * bitcast<f32>(entry.y) * brdf(m, n, w_in, w_out);
     }
     return sum;

@@ -27,12 +27,12 @@ struct Material {
 // A first-shot light sample (Rust: GpuLightSample).
 struct LightSample {
     position: vec4<f32>, // xyz y_i
-    normal: vec4<f32>,   // xyz n_L, w trapezoid weight
+    normal: vec4<f32>,   // xyz n_L, spot axis or directional direction of travel; w trapezoid weight
     strength: vec4<f32>, // rgb S_i
     kind: u32,           // LIGHT_*
+    cone_scale: f32,     // spot: falloff = clamp(cd cone_scale + cone_offset, 0, 1)^2
+    cone_offset: f32,
     _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
 }
 
 // Iteration state of a patch (Rust: GpuPatchState).
@@ -49,9 +49,9 @@ struct Camera {
     eye: vec4<f32>,
     right: vec4<f32>,    // w tan(fov_x / 2)
     up: vec4<f32>,       // w tan(fov_y / 2)
-    forward: vec4<f32>,  // w near distance
+    forward: vec4<f32>,  // w near distance (orthographic: far distance of depth 1 - z / far)
     jitter: vec4<f32>,   // xy in [0, 1), zw window centre (tangent units)
-    size: vec4<u32>,     // x width, y height
+    size: vec4<u32>,     // x width, y height, z VIEW_ORTHOGRAPHIC (right.w, up.w: half extents)
 }
 
 // Image estimate parameters (Rust: GpuEstimateParams).
@@ -60,14 +60,15 @@ struct EstimateParams {
     patch_count: u32,
     light_count: u32,
     mis: u32,            // 1: emitting shapes' direct light shared between D and G
-    _pad1: u32,
+    first_row: u32,      // the image row of this band's first (its image_sum starts there)
 }
 
 // A light for the per-pixel direct light of one pass (Rust: GpuDirectLight).
 struct DirectLight {
-    position: vec4<f32>, // xyz point light, or this pass's point on the area light
-    normal: vec4<f32>,   // xyz n_L (zero for a point light); w T A_t of an emitting shape (MIS), else 0
-    strength: vec4<f32>, // rgb factor of V f cos / r^2 (cos_L too for an area light)
+    position: vec4<f32>, // xyz point or spot light, or this pass's point on the area light
+    normal: vec4<f32>,   // xyz n_L, spot axis, sun's direction of travel (zero for a point light); w T A_t of an emitting shape (MIS), else 0
+    strength: vec4<f32>, // rgb factor of V f cos / r^2 (cos_L too for an area light; V f cos for a sun)
+    cone: vec4<f32>,     // xy spot cone scale and offset
     kind: u32,           // LIGHT_*
     first_face: u32,     // its window's faces in the face table
     faces: u32,
@@ -128,6 +129,30 @@ fn pixel_direction(camera: Camera, pixel: vec2<u32>) -> vec3<f32> {
         1.0 - 2.0 * (f32(pixel.y) + camera.jitter.y) / size.y);
     let window = ndc * vec2<f32>(camera.right.w, camera.up.w) + camera.jitter.zw;
     return camera.forward.xyz + window.x * camera.right.xyz + window.y * camera.up.xyz;
+}
+
+// A spot light's falloff at cosine cd to its axis (glTF KHR_lights_punctual, scene::SpotCone).
+fn spot_falloff(cd: f32, scale: f32, offset: f32) -> f32 {
+    let f = clamp(cd * scale + offset, 0.0, 1.0);
+    return f * f;
+}
+
+// Clip position of a scene point in a camera or window face's item buffer: a pinhole view
+// (reversed-z, the sample point inside the pixel moved onto the rasteriser's pixel centre)
+// or a parallel one (VIEW_ORTHOGRAPHIC: linear depth 1 - z / far, greater is nearer).
+fn view_clip(view: Camera, position: vec3<f32>) -> vec4<f32> {
+    let rel = position - view.eye.xyz;
+    let x = dot(rel, view.right.xyz);
+    let y = dot(rel, view.up.xyz);
+    let z = dot(rel, view.forward.xyz);
+    let size = vec2<f32>(view.size.xy);
+    // Shift so that the sample point inside the pixel maps to the pixel's centre.
+    let shift = vec2<f32>(2.0 * (0.5 - view.jitter.x) / size.x, -2.0 * (0.5 - view.jitter.y) / size.y);
+    if (view.size.z == VIEW_ORTHOGRAPHIC) {
+        return vec4<f32>(x / view.right.w + shift.x, y / view.up.w + shift.y, 1.0 - z / view.forward.w, 1.0);
+    }
+    let window = vec2<f32>(x, y) - view.jitter.zw * z;
+    return vec4<f32>(window.x / view.right.w + shift.x * z, window.y / view.up.w + shift.y * z, view.forward.w, z);
 }
 
 fn patch_centre(p: Patch) -> vec3<f32> {
