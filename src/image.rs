@@ -121,14 +121,20 @@ impl Image {
         if *p97 > 0.0 { (0.8 / *p97) as f32 } else { 1.0 }
     }
 
-    /// 8-bit sRGB PNG bytes of the image scaled by `exposure` and clipped.
-    pub fn png_bytes(&self, exposure: f32) -> Result<Vec<u8>> {
+    /// The tonemapped image, 8-bit sRGB R, G, B per pixel, row by row: the image scaled by
+    /// `exposure` and clipped. The PNG holds these bytes, and the viewer shows them.
+    pub fn srgb8(&self, exposure: f32) -> Vec<u8> {
         fn srgb(v: f32) -> u8 {
             let v = if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 };
             let s = if v <= 0.003_130_8 { 12.92 * v } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
             (s * 255.0 + 0.5) as u8
         }
-        let data: Vec<u8> = self.pixels.iter().flat_map(|p| p.map(|c| srgb(c * exposure))).collect();
+        self.pixels.iter().flat_map(|p| p.map(|c| srgb(c * exposure))).collect()
+    }
+
+    /// 8-bit sRGB PNG bytes of the image scaled by `exposure` and clipped (`srgb8`).
+    pub fn png_bytes(&self, exposure: f32) -> Result<Vec<u8>> {
+        let data = self.srgb8(exposure);
         let mut bytes = Vec::new();
         {
             let mut encoder = png::Encoder::new(&mut bytes, self.width, self.height);

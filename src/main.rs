@@ -1,6 +1,7 @@
 //! The `firstshot` command line (docs/CLI.md): parse flags, call the library, report.
 
 mod cli;
+mod viewer;
 
 use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
@@ -42,6 +43,9 @@ enum Command {
     /// Adds the parts of a sharded run exactly (docs/DISTRIBUTED.md): writes OUT.exr, OUT.png,
     /// OUT.part (itself mergeable) and the stats; reports missing shards.
     Merge(MergeArgs),
+    /// Opens a window on the scene (docs/CLI.md, "Viewer"): the image refines while it is
+    /// shown; the mouse and keys move the camera.
+    View(Box<viewer::ViewArgs>),
 }
 
 #[derive(Args)]
@@ -283,6 +287,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Compare { a, b }) => compare(&a, &b),
         Some(Command::Merge(m)) => merge(&m),
+        Some(Command::View(v)) => viewer::run(*v),
         None => run(cli.render),
     };
     match result {

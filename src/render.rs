@@ -470,9 +470,7 @@ pub fn render_path(
         total_ms: 0.0,
     };
     for f in first..frames.len() as u32 {
-        renderer.views[0].camera = Camera { width: options.width, height: options.height, ..frames[f as usize] };
-        renderer.clear_images();
-        renderer.image_start = step;
+        renderer.restart_image(Camera { width: options.width, height: options.height, ..frames[f as usize] }, step);
         let end = step + steps_per_frame;
         let stats = renderer.advance(step, end, hooks)?;
         step_ms.push(stats.step_ms_median);
@@ -676,6 +674,28 @@ impl<'a> Renderer<'a> {
     /// The views, in order.
     pub fn views(&self) -> &[ViewImage] {
         &self.views
+    }
+
+    /// Points the first view at `camera` (of the view's size) and starts its image average
+    /// afresh with step `step` (or, within the burn-in, with the burn-in's end): a frame of
+    /// a walkthrough, or a camera move in the viewer. The iteration state carries on, since
+    /// it does not depend on the view; so the new image sharpens within a few steps.
+    pub fn restart_image(&mut self, camera: Camera, step: u32) {
+        let view = &mut self.views[0];
+        view.camera = Camera { width: view.camera.width, height: view.camera.height, ..camera };
+        self.clear_images();
+        self.image_start = step.max(self.burn_in);
+    }
+
+    /// The step whose estimate is the first of the image (`restart_image`).
+    pub fn image_start(&self) -> u32 {
+        self.image_start
+    }
+
+    /// Runs steps `step..end` in batches, as `run` does (fewer if the hooks stop them);
+    /// returns the step reached. The viewer calls it with a few steps per frame.
+    pub fn advance_to(&mut self, step: u32, end: u32, hooks: &mut dyn Hooks) -> Result<u32> {
+        Ok(self.advance(step, end, hooks)?.steps)
     }
 
     /// Zeroes every view's image sum (a frame of a walkthrough starts its own average).

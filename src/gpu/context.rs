@@ -94,7 +94,10 @@ pub struct Context {
 }
 
 fn instance() -> wgpu::Instance {
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    instance_for(wgpu::InstanceDescriptor::new_without_display_handle())
+}
+
+fn instance_for(mut desc: wgpu::InstanceDescriptor) -> wgpu::Instance {
     desc.backends = wgpu::Backends::all();
     // Validation layers are for development; they slow lavapipe down a lot.
     desc.flags = wgpu::InstanceFlags::empty();
@@ -160,12 +163,41 @@ impl Context {
     /// such as the benchmark harness ask for timestamp queries); `features()` says which
     /// were enabled. Nothing in the library depends on them.
     pub fn new_with_features(choice: &AdapterChoice, wanted: wgpu::Features) -> Result<Context> {
-        let instance = instance();
-        let adapters = sorted_adapters(&instance);
+        Self::open(&instance(), choice, wanted, None)
+    }
+
+    /// As `new`, for a window (the viewer): the adapter must be able to present to it, and
+    /// the window's surface comes with the context (a surface belongs to the instance that
+    /// made it, which must be the adapter's).
+    pub fn with_window<W>(choice: &AdapterChoice, window: W) -> Result<(Context, wgpu::Surface<'static>)>
+    where
+        W: wgpu::WindowHandle + wgpu::rwh::HasDisplayHandle + Clone + std::fmt::Debug + 'static,
+    {
+        let instance = instance_for(wgpu::InstanceDescriptor::new_with_display_handle(Box::new(window.clone())));
+        let surface = instance
+            .create_surface(window)
+            .map_err(|e| Error::Adapter(format!("could not make a surface for the window: {e}")))?;
+        let ctx = Self::open(&instance, choice, wgpu::Features::empty(), Some(&surface))?;
+        Ok((ctx, surface))
+    }
+
+    fn open(
+        instance: &wgpu::Instance,
+        choice: &AdapterChoice,
+        wanted: wgpu::Features,
+        surface: Option<&wgpu::Surface<'_>>,
+    ) -> Result<Context> {
+        let adapters = sorted_adapters(instance);
         let found: Vec<String> = adapters.iter().map(|a| AdapterSummary::of(&a.get_info()).to_string()).collect();
         let mut failures = Vec::new();
+        // Adapters that fit the choice but cannot draw into the window.
+        let mut cannot_present = Vec::new();
         for (_, adapter) in adapters.into_iter().enumerate().filter(|(i, a)| matches(choice, *i, &a.get_info())) {
             let summary = AdapterSummary::of(&adapter.get_info());
+            if surface.is_some_and(|s| !adapter.is_surface_supported(s)) {
+                cannot_present.push(summary.to_string());
+                continue;
+            }
             let desc = wgpu::DeviceDescriptor {
                 label: Some("firstshot.device"),
                 required_features: wanted & adapter.features(),
@@ -199,6 +231,13 @@ impl Context {
         if found.is_empty() {
             return Err(Error::Adapter(format!(
                 "--adapter {choice}: no GPU adapter found; install a Vulkan driver (e.g. Debian's mesa-vulkan-drivers) or an OpenGL/EGL driver"
+            )));
+        }
+        if failures.is_empty() && !cannot_present.is_empty() {
+            return Err(Error::Adapter(format!(
+                "--adapter {choice}: {} cannot draw into the window; found: {}; try another --adapter",
+                cannot_present.join("; "),
+                found.join("; ")
             )));
         }
         if failures.is_empty() {

@@ -72,6 +72,24 @@ pub fn mitsuba_python() -> Option<mitsuba::Python> {
     }
 }
 
+/// `xvfb-run` (Debian's xvfb), which the viewer's tests (tests/viewer.rs) open their windows
+/// under: a virtual X display. With `FIRSTSHOT_REQUIRE_DISPLAY=1` (CI) a missing one is a
+/// failure, elsewhere a visible skip.
+pub fn xvfb_run() -> Option<PathBuf> {
+    let found = std::env::var_os("PATH")
+        .map(|paths| std::env::split_paths(&paths).map(|p| p.join("xvfb-run")).find(|p| p.is_file()));
+    match found.flatten() {
+        Some(path) => Some(path),
+        None => {
+            if std::env::var("FIRSTSHOT_REQUIRE_DISPLAY").is_ok_and(|v| v == "1") {
+                panic!("FIRSTSHOT_REQUIRE_DISPLAY=1 but no xvfb-run on PATH: apt-get install xvfb xauth");
+            }
+            eprintln!("SKIPPED (no xvfb-run on PATH; apt-get install xvfb xauth)");
+            None
+        }
+    }
+}
+
 use firstshot::scene::{LightSample, Patch, PatchKind, Patches};
 use glam::DVec3;
 
