@@ -60,7 +60,7 @@ pub const IMAGE_SUM_BYTES_PER_PIXEL: u64 = 16;
 /// binding (and one buffer) of the device holds, so an image of any size within the
 /// device's memory is summed, in as few dispatches as the limit allows.
 pub fn band_rows(limits: &wgpu::Limits, width: u32) -> u32 {
-    let most = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+    let most = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
     let rows = most / (u64::from(width.max(1)) * IMAGE_SUM_BYTES_PER_PIXEL);
     rows.clamp(1, u64::from(u32::MAX)) as u32
 }
