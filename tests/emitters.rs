@@ -6,18 +6,14 @@
 mod common;
 
 use common::ray_caster::{Caster, camera_ray};
-use common::scratch::{Scratch, write};
+use common::scratch::Scratch;
 use firstshot::image::{Image, image_error};
 use firstshot::render::{RenderOptions, render};
 use firstshot::scene::{self, Scene};
 use glam::DVec3;
 
 fn load(test: &str, text: &str) -> (Scratch, Scene) {
-    let scratch = Scratch::new("emitters", test);
-    let path = scratch.join("scene.toml");
-    write(&path, text);
-    let scene = scene::load(&path).unwrap();
-    (scratch, scene)
+    common::scenes::load_text("emitters", test, text)
 }
 
 /// A floor, a triangle above it and, above both, an emitting pyramid pointing down: four

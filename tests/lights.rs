@@ -7,7 +7,7 @@
 mod common;
 
 use common::ray_caster::{Caster, camera_ray};
-use common::scratch::{Scratch, write};
+use common::scratch::Scratch;
 use firstshot::Error;
 use firstshot::first_shot::LightWindow;
 use firstshot::image::Image;
@@ -56,20 +56,7 @@ fn gltf_falloff(cos_to_axis: f64, inner_degrees: f64, outer_degrees: f64) -> f64
 }
 
 fn load(test: &str, text: &str) -> (Scratch, Scene) {
-    let scratch = Scratch::new("lights", test);
-    let path = scratch.join("scene.toml");
-    write(&path, text);
-    let scene = scene::load(&path).unwrap();
-    (scratch, scene)
-}
-
-fn render_direct(scene: &Scene, passes: u32) -> Option<Image> {
-    let ctx = common::gpu()?;
-    let mut options = RenderOptions::from_scene(scene);
-    options.iterations = 0;
-    options.direct_passes = passes;
-    let patches = scene::tessellate(scene, options.patch_size).unwrap();
-    Some(render(&ctx, scene, &patches, &options).unwrap().image)
+    common::scenes::load_text("lights", test, text)
 }
 
 /// What one camera ray sees of a light, by the caster: the reflected radiance, the triangle
@@ -173,7 +160,7 @@ fn test01_sun_gives_irradiance_times_cos_and_a_sharp_shadow_per_pixel() {
         d.x, d.y, d.z
     );
     let (_scratch, scene) = load("sun", &text);
-    let Some(image) = render_direct(&scene, 16) else { return };
+    let Some(image) = common::render_direct(&scene, 16) else { return };
     // The floor's closed form: E = irradiance cos(theta), radiance albedo / pi E.
     let floor = ALBEDO / PI * 2.0 * theta.cos();
     let mut lit_floor = 0;
@@ -211,7 +198,7 @@ fn test02_spot_follows_the_gltf_falloff_per_pixel() {
     );
     let (_scratch, scene) = load("spot", &text);
     assert_eq!(scene.surfaces.len(), 1, "the floor alone");
-    let Some(image) = render_direct(&scene, 64) else { return };
+    let Some(image) = common::render_direct(&scene, 64) else { return };
     let spot = |x: DVec3, n: DVec3| {
         let to = x - position;
         let r2 = to.length_squared();
@@ -507,7 +494,7 @@ fn test08_sun_does_not_leak_through_a_tessellated_roof() {
     let (_scratch, scene) = load("roof", &text);
     let roof = &scene.surfaces[1].triangles[0];
     assert!((roof.vertices[1] - roof.vertices[0]).cross(roof.vertices[2] - roof.vertices[0]).y < 0.0, "faces down");
-    let Some(image) = render_direct(&scene, 4) else { return };
+    let Some(image) = common::render_direct(&scene, 4) else { return };
     let sun = |x: DVec3, n: DVec3| (x - 100.0 * d, 2.0 * n.dot(-d).max(0.0));
     let (_, _, shadowed) = compare_per_pixel(&image, &scene, &sun, 5e-3, 1e-6);
     assert!(shadowed > 200, "the roof must shade the floor ({shadowed} pixels)");

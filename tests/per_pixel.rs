@@ -6,7 +6,7 @@
 mod common;
 
 use common::ray_caster::{Caster, camera_ray};
-use common::scratch::{Scratch, write};
+use common::scratch::Scratch;
 use firstshot::image::{Image, image_error};
 use firstshot::render::{RenderOptions, render};
 use firstshot::scene::{self, Light, Scene};
@@ -31,20 +31,7 @@ material = "grey"
 "#;
 
 fn load(test: &str, text: &str) -> (Scratch, Scene) {
-    let scratch = Scratch::new("per_pixel", test);
-    let path = scratch.join("scene.toml");
-    write(&path, text);
-    let scene = scene::load(&path).unwrap();
-    (scratch, scene)
-}
-
-fn render_direct(scene: &Scene, passes: u32) -> Option<Image> {
-    let ctx = common::gpu()?;
-    let mut options = RenderOptions::from_scene(scene);
-    options.iterations = 0;
-    options.direct_passes = passes;
-    let patches = scene::tessellate(scene, options.patch_size).unwrap();
-    Some(render(&ctx, scene, &patches, &options).unwrap().image)
+    common::scenes::load_text("per_pixel", test, text)
 }
 
 /// Radiance toward the camera along one camera ray, direct light only, with `light_points`
@@ -86,7 +73,7 @@ fn test01_point_light_shadow_is_exact_per_pixel() {
          [[lights]]\ntype = \"point\"\nposition = [0.2, 2.0, -0.3]\npower = [10.0, 10.0, 10.0]\n"
     );
     let (_scratch, scene) = load("point", &text);
-    let Some(image) = render_direct(&scene, 64) else { return };
+    let Some(image) = common::render_direct(&scene, 64) else { return };
     let caster = Caster::new(&scene);
     let Light::Point { position, power } = scene.lights[0] else { unreachable!() };
     let light = [(position, None, power[0] as f64 / (4.0 * std::f64::consts::PI))];
@@ -148,8 +135,8 @@ fn test02_area_light_penumbra_converges_to_the_integral_over_the_light() {
          [[lights]]\ntype = \"area\"\nvertices = [[-0.25, 1.6, -0.25], [0.25, 1.6, -0.25], [0.25, 1.6, 0.25], [-0.25, 1.6, 0.25]]\nradiance = [5.0, 5.0, 5.0]\nsubdivisions = 2\n"
     );
     let (_scratch, scene) = load("area", &text);
-    let Some(coarse) = render_direct(&scene, 4) else { return };
-    let fine = render_direct(&scene, 64).unwrap();
+    let Some(coarse) = common::render_direct(&scene, 4) else { return };
+    let fine = common::render_direct(&scene, 64).unwrap();
     let caster = Caster::new(&scene);
     // The light as a 24 x 24 midpoint grid: each point stands for its cell's area.
     let Light::Area { vertices: [a, b, _, d], radiance, .. } = scene.lights[0] else { unreachable!() };

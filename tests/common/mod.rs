@@ -196,3 +196,14 @@ pub fn first_shot_table(
     firstshot::first_shot::run(ctx, &mut buffers, patches, resolution, window).unwrap();
     firstshot::first_shot::read_table(ctx, &buffers).unwrap()
 }
+
+/// The direct-light image of `scene` (`--iterations 0`) after `passes` passes, at the
+/// scene's own settings; `None` without a GPU (see `gpu`).
+pub fn render_direct(scene: &firstshot::scene::Scene, passes: u32) -> Option<firstshot::image::Image> {
+    let ctx = gpu()?;
+    let mut options = firstshot::render::RenderOptions::from_scene(scene);
+    options.iterations = 0;
+    options.direct_passes = passes;
+    let patches = firstshot::scene::tessellate(scene, options.patch_size).unwrap();
+    Some(firstshot::render::render(&ctx, scene, &patches, &options).unwrap().image)
+}

@@ -44,3 +44,14 @@ pub fn edited(edits: &[(&str, &str)]) -> String {
 pub fn shipped(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes").join(format!("{name}.toml"))
 }
+
+/// Writes `text` as `scene.toml` in a scratch folder of its own (`group`/`test`) and loads
+/// it; the folder lives as long as the returned `Scratch` (meshes beside it may be written
+/// there too).
+pub fn load_text(group: &str, test: &str, text: &str) -> (super::scratch::Scratch, firstshot::scene::Scene) {
+    let scratch = super::scratch::Scratch::new(group, test);
+    let path = scratch.join("scene.toml");
+    super::scratch::write(&path, text);
+    let scene = firstshot::scene::load(&path).unwrap();
+    (scratch, scene)
+}
