@@ -105,7 +105,8 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_name = "W")]
     light_window: Option<LightWindow>,
     /// Pixels along a full face edge of the lights' windows for the per-pixel direct light
-    /// (default: the hemicube resolution).
+    /// (default: enough for a typical patch to be 8 texels across as the lights see it, at
+    /// least the hemicube resolution, at most 2048).
     #[arg(long, allow_negative_numbers = true, value_name = "R")]
     shadow_resolution: Option<u32>,
     /// Passes of a direct-light image (--iterations 0), each a new camera sample per pixel
@@ -431,7 +432,7 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     options.height = args.height.unwrap_or(options.height);
     options.hemicube_resolution = args.hemicube_resolution.unwrap_or(options.hemicube_resolution);
     options.bundle_resolution = args.bundle_resolution.unwrap_or(options.bundle_resolution);
-    options.shadow_resolution = args.shadow_resolution.unwrap_or(options.hemicube_resolution);
+    options.shadow_resolution = args.shadow_resolution;
     if let Some(v) = args.direct_passes {
         if !(1..=MAX_DIRECT_PASSES).contains(&v) {
             return Err(usage(format!("--direct-passes {v}: expected 1 to {MAX_DIRECT_PASSES} passes")));

@@ -62,8 +62,9 @@ pub struct RenderOptions {
     /// step exceeds. Tests set it small to exercise the overflow-and-redo path.
     pub bundle_capacity: Option<u64>,
     /// Pixels along a full face edge of the lights' windows for the per-pixel direct light
-    /// (less if the shadow memory budget needs it).
-    pub shadow_resolution: u32,
+    /// (less if the shadow memory budget needs it); `None`: chosen from the patches the
+    /// lights see (`direct_light::auto_resolution`).
+    pub shadow_resolution: Option<u32>,
     /// Passes of an image without iteration.
     pub direct_passes: u32,
     /// Steps that advance the state before any is averaged into the image; `None`: from
@@ -93,7 +94,7 @@ impl RenderOptions {
             time_limit: None,
             bundle_capacity: None,
             image_band_rows: None,
-            shadow_resolution: scene.settings.hemicube_resolution,
+            shadow_resolution: None,
             direct_passes: DEFAULT_DIRECT_PASSES,
             burn_in: None,
             window_steps: DEFAULT_WINDOW_STEPS,

@@ -304,7 +304,7 @@ fn test04_no_start_up_bias() {
     let scene = scene::load(&common::scenes::shipped("cornell_box")).unwrap();
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (48, 48);
-    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, 128, 128);
+    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, 128, Some(128));
     options.bundle_resolution = 128;
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let run = |iterations| {
@@ -368,7 +368,7 @@ fn test07_an_image_sum_in_bands_of_rows_is_the_same_bits() {
     let scene = scene::load(&common::scenes::shipped("cornell_box")).unwrap();
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (40, 30);
-    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, 64, 64);
+    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, 64, Some(64));
     (options.bundle_resolution, options.iterations, options.burn_in) = (64, 12, Some(2));
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let whole = render(&ctx, &scene, &patches, &options).unwrap();
@@ -379,4 +379,67 @@ fn test07_an_image_sum_in_bands_of_rows_is_the_same_bits() {
     assert!(bits(&whole.image_sum) == bits(&banded.image_sum), "the banded sum differs");
     assert!(whole.image_sum.iter().all(|p| p[3] > 0.0), "every pixel of both halves has estimates");
     assert_eq!(whole.image.pixels, banded.image.pixels);
+}
+
+#[test]
+fn test08_a_finely_tessellated_occluder_does_not_leak_light() {
+    // A window texel names the patch seen through its centre, and V tests the segment from
+    // the light against the patches of the 2 x 2 texels around x's direction: an occluding
+    // patch that covers none of those centres is missed, even inside one smooth occluder cut
+    // into patches barely larger than a texel (docs/ALGORITHM.md 6). The automatic shadow
+    // resolution (direct_light::auto_resolution) makes a typical patch 8 texels across. The
+    // umbra of a finely tessellated square must then be dark; at the hemicube resolution
+    // (the former default) light leaks through it, which shows that the test can fail.
+    let text = "format = 1\n[settings]\npatch_size = 0.06\nhemicube_resolution = 128\n\
+        [materials.grey]\ntype = \"diffuse\"\nalbedo = [0.6, 0.6, 0.6]\n\
+        [[shapes]]\ntype = \"quad\"\nvertices = [[-1.0, 0.0, -1.0], [-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0]]\nmaterial = \"grey\"\n\
+        [[shapes]]\ntype = \"quad\"\nvertices = [[-0.3, 0.8, -0.3], [-0.3, 0.8, 0.3], [0.3, 0.8, 0.3], [0.3, 0.8, -0.3]]\nmaterial = \"grey\"\ntwo_sided = true\n\
+        [camera]\nposition = [0.05, 3.0, 0.02]\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 0.0, 1.0]\nfov_y = 40.0\nwidth = 40\nheight = 40\n\
+        [[lights]]\ntype = \"point\"\nposition = [0.05, 1.8, -0.04]\npower = [10.0, 10.0, 10.0]\n";
+    let (_scratch, scene) = load("tessellated_occluder", text);
+    let Some(ctx) = common::gpu() else { return };
+    let caster = Caster::new(&scene);
+    let Light::Point { position, power } = scene.lights[0] else { unreachable!() };
+    let light = [(position, None, power[0] as f64 / (4.0 * std::f64::consts::PI))];
+    let patches = scene::tessellate(&scene, scene.settings.patch_size).unwrap();
+    // The floor pixels whose whole square (corners, edge midpoints, a 4 x 4 grid) the caster
+    // finds in the occluder's shadow, and the lit level beside it.
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let mut umbra = Vec::new();
+    let mut lit = 0.0f64;
+    for py in 0..h {
+        for px in 0..w {
+            let mut all_dark = true;
+            let mut on_floor = true;
+            for k in 0..25 {
+                let (sx, sy) = ((k % 5) as f64 * 0.25, (k / 5) as f64 * 0.25);
+                let (o, d) = camera_ray(&scene.camera, w, h, px as f64 + sx, py as f64 + sy);
+                let (value, tri, _) = direct_along(&caster, o, d, &light);
+                // Up-facing: the floor (the occluder's lit top is never dark).
+                on_floor &= tri.is_some_and(|i| caster.tris[i].n.y > 0.5);
+                all_dark &= value == 0.0;
+                lit = lit.max(value);
+            }
+            if all_dark && on_floor {
+                umbra.push((px, py));
+            }
+        }
+    }
+    assert!(umbra.len() > 60, "the occluder must shade a patch of the floor ({} pixels)", umbra.len());
+    let leaked = |shadow_resolution: Option<u32>| {
+        let mut options = RenderOptions::from_scene(&scene);
+        (options.iterations, options.direct_passes, options.shadow_resolution) = (0, 16, shadow_resolution);
+        let rendered = render(&ctx, &scene, &patches, &options).unwrap();
+        let leaks = umbra.iter().filter(|&&(px, py)| rendered.image.at(px, py)[0] as f64 > 1e-3 * lit).count();
+        (leaks, rendered.stats.shadow_resolution)
+    };
+    let (before, r_before) = leaked(Some(scene.settings.hemicube_resolution));
+    let (after, r_after) = leaked(None);
+    eprintln!(
+        "{} umbra pixels; lit by leaks: {before} at shadow resolution {r_before}, {after} at {r_after} (automatic)",
+        umbra.len()
+    );
+    assert!(r_after > r_before, "the automatic resolution must exceed the hemicube's here: {r_after}");
+    assert!(before * 10 > umbra.len(), "at the hemicube resolution the leak should show: {before} of {}", umbra.len());
+    assert!(after * 50 <= umbra.len(), "the automatic resolution leaks in {after} of {} umbra pixels", umbra.len());
 }
