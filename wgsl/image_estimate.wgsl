@@ -305,6 +305,39 @@ fn nearer(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, towar
     return best;
 }
 
+// `best`, or fragment k of the line [begin, end) if x's own ray x + t toward hits its
+// triangle nearer ahead (Moller-Trumbore; the same distances as `nearer`).
+fn nearer_hit(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, toward: vec3<f32>, eps: f32) -> Candidate {
+    if (k < range.x || k >= range.y) {
+        return best;
+    }
+    let m = fragments[k].y & ~FRAGMENT_FRONT_BIT;
+    let plane = patches[m].normal;
+    let dist = plane.w - dot(plane.xyz, x);
+    if (m == j || abs(dist) <= eps) {
+        return best;
+    }
+    let a = patches[m].v0.xyz;
+    let e1 = patches[m].v1.xyz - a;
+    let e2 = patches[m].v2.xyz - a;
+    let p = cross(toward, e2);
+    let det = dot(e1, p);
+    if (abs(det) < 1e-30) {
+        return best;
+    }
+    let inv = 1.0 / det;
+    let o = x - a;
+    let u = dot(o, p) * inv;
+    let q = cross(o, e1);
+    let v = dot(toward, q) * inv;
+    let t = dot(e2, q) * inv;
+    let tie = abs(t - best.t) <= eps && dot(plane.xyz, toward) < 0.0;
+    if (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0 && (t < best.t - eps || tie)) {
+        return Candidate(t, m + 1u);
+    }
+    return best;
+}
+
 // The radiance arriving at x (on patch j, normal n) from direction `toward` (= s d) along
 // this step's bundle.
 fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
@@ -341,6 +374,7 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
     // past the line's end. Then the gather agrees with the patch state J_j it refines, also
     // at contacts, where the line's centre and x's own ray can pass on different sides.
     let range = vec2<u32>(begin, end);
+    let eps = 1e-5 / bundle.centre.w;
     var own = NO_PATCH;
     own = own_fragment(own, lo - 2u, range, j);
     own = own_fragment(own, lo - 1u, range, j);
@@ -360,12 +394,34 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
         }
         return vec3<f32>(0.0);
     }
-    // Else (x near j's edge, the line's centre on another patch): the nearest of the next
-    // four fragments in the direction of travel, by
+    // Else (x near j's edge, the line's centre on another patch) the line may pass through
+    // a surface x's ray misses (a neighbour's back face: black) or beside one x's ray hits.
+    // First, the nearest of the next four fragments in the direction of travel whose
+    // triangle x's own ray hits: the surface x really sees that way, wherever it is on the
+    // line too.
+    var hit = Candidate(3.4e38, NO_PATCH);
+    if (s > 0.0) {
+        hit = nearer_hit(hit, lo, range, j, x, toward, eps);
+        hit = nearer_hit(hit, lo + 1u, range, j, x, toward, eps);
+        hit = nearer_hit(hit, lo + 2u, range, j, x, toward, eps);
+        hit = nearer_hit(hit, lo + 3u, range, j, x, toward, eps);
+    } else {
+        hit = nearer_hit(hit, lo - 1u, range, j, x, toward, eps);
+        hit = nearer_hit(hit, lo - 2u, range, j, x, toward, eps);
+        hit = nearer_hit(hit, lo - 3u, range, j, x, toward, eps);
+        hit = nearer_hit(hit, lo - 4u, range, j, x, toward, eps);
+    }
+    // A back face as the nearest hit says the ray entered a solid through a face the line
+    // missed (x's ray and the line on two sides of its edge): that entry is not on the line,
+    // so the rules below decide, as they do where the ray hits nothing the line holds.
+    if (hit.patch_id != NO_PATCH && dot(patches[hit.patch_id - 1u].normal.xyz, toward) < 0.0) {
+        let m = hit.patch_id - 1u;
+        return image_outgoing[m].rgb + emitted_share(m, x, toward);
+    }
+    // Failing that, the nearest of the next four fragments in the direction of travel, by
     // the exact distance from x along the ray to each one's plane. Unrolled: a CPU adapter
     // runs a data-dependent loop over storage many times slower.
     var best = Candidate(3.4e38, NO_PATCH);
-    let eps = 1e-5 / bundle.centre.w;
     if (s > 0.0) {
         best = nearer(best, lo, range, j, x, toward, eps);
         best = nearer(best, lo + 1u, range, j, x, toward, eps);
