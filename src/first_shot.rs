@@ -237,6 +237,7 @@ pub fn run(
             total,
             &reduce.row_counts,
             &buffers.samples,
+            buffers.page_bytes,
         );
         ctx.queue.submit([encoder.finish()]);
         ctx.wait()?;

@@ -58,6 +58,10 @@ pub struct RenderOptions {
     /// Rows per band of the image sum; `None`: as many as one storage binding holds
     /// (`image_estimate::band_rows`). Set only by tests, to check that bands change nothing.
     pub image_band_rows: Option<u32>,
+    /// Largest page, in bytes, of the per-patch arrays split over several buffers
+    /// (`scene_buffers::PerPatch`); `None`: one storage binding of the device. Set only by
+    /// tests, to emulate a smaller device and check that pages change nothing.
+    pub page_bytes: Option<u64>,
     /// Initial fragment room of a bundle step; `None` takes the geometric bound, which no
     /// step exceeds. Tests set it small to exercise the overflow-and-redo path.
     pub bundle_capacity: Option<u64>,
@@ -93,6 +97,7 @@ impl RenderOptions {
             time_limit: None,
             bundle_capacity: None,
             image_band_rows: None,
+            page_bytes: None,
             shadow_resolution: scene.settings.hemicube_resolution,
             direct_passes: DEFAULT_DIRECT_PASSES,
             burn_in: None,
@@ -279,6 +284,7 @@ pub fn fingerprint(scene: &Scene, options: &RenderOptions) -> u64 {
     options.time_limit = None;
     options.bundle_capacity = None;
     options.image_band_rows = None;
+    options.page_bytes = None;
     crate::checkpoint::fnv1a(format!("{scene:?}\n{options:?}").as_bytes())
 }
 
@@ -320,10 +326,40 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
     if n > MAX_PATCHES as u64 {
         return Err(Error::Limits(format!("{n} patches exceed the limit of {MAX_PATCHES}; use a larger --patch-size")));
     }
-    let fewer = "use a larger --patch-size or a GPU with more memory";
-    fit("the patch table", n * std::mem::size_of::<GpuPatch>() as u64, fewer)?;
-    fit("the rasterised triangles", n * 3 * std::mem::size_of::<RasterVertex>() as u64, fewer)?;
-    fit("the iteration state", n * std::mem::size_of::<GpuPatchState>() as u64, fewer)?;
+    // Every kernel's storage bindings, the pages of the paged arrays included.
+    let per_stage = limits.max_storage_buffers_per_shader_stage;
+    if let Some(spec) = crate::stages::SPECS.iter().find(|s| crate::gpu::bindings::storage_buffers(s) > per_stage) {
+        return Err(Error::Limits(format!(
+            "the kernel {} binds {} storage buffers (the pages of its per-patch arrays included), the device allows {per_stage} per shader stage (max_storage_buffers_per_shader_stage); use an adapter that allows more",
+            spec.stem,
+            crate::gpu::bindings::storage_buffers(spec)
+        )));
+    }
+    let fewer = "use a larger --patch-size (or a coarser tessellation) or a GPU with more memory";
+    // The per-patch arrays of more than 8 bytes a patch are split over pages, a buffer each
+    // (`scene_buffers::PerPatch`): at most `pages` of them.
+    let page = crate::gpu::scene_buffers::page_bytes(limits, options.page_bytes);
+    for array in crate::gpu::scene_buffers::PAGED_ARRAYS {
+        let capacity = array.capacity(page);
+        if n > capacity {
+            return Err(Error::Limits(format!(
+                "{n} patches: {} ({} bytes a patch) holds at most {capacity} patches on this device, in {} pages of {} patches (a page at most {page} bytes: max_storage_buffer_binding_size {binding}, max_buffer_size {buffer}); {fewer}",
+                array.what,
+                array.bytes,
+                array.pages,
+                array.patches_per_page(page)
+            )));
+        }
+    }
+    // The rest are one buffer each: the first shot's sums (8 bytes a patch) and row counts
+    // one binding, the triangles a vertex buffer (never bound as storage).
+    fit("the first shot's per-patch sums", n * 8, fewer)?;
+    let triangles = n * 3 * std::mem::size_of::<RasterVertex>() as u64;
+    if triangles > buffer {
+        return Err(Error::Limits(format!(
+            "the rasterised triangles need {triangles} bytes in one vertex buffer, the device allows {buffer} (max_buffer_size); {fewer}"
+        )));
+    }
     let max_dim = limits.max_texture_dimension_2d;
     let sizes = match options.cameras.is_empty() {
         true => vec![(options.width, options.height)],
@@ -450,7 +486,7 @@ pub fn render_path(
         if s.state.len() as u64 != renderer.buffers.state.size() {
             return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
         }
-        ctx.queue.write_buffer(&renderer.buffers.state, 0, s.state);
+        renderer.buffers.state.write(&ctx.queue, s.state);
         step = s.step;
     }
     let mut step_ms = Vec::new();
@@ -553,7 +589,8 @@ impl<'a> Renderer<'a> {
         check_limits(&ctx.limits(), patches, options)?;
         let device = &ctx.device;
         let upload = Instant::now();
-        let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
+        let page = crate::gpu::scene_buffers::page_bytes(&ctx.limits(), options.page_bytes);
+        let mut buffers = SceneBuffers::with_pages(device, scene, patches, options.first_shot, page);
         let upload_ms = milliseconds(upload);
         let first_shot = if !options.first_shot || patches.samples.is_empty() {
             None
@@ -794,8 +831,11 @@ impl<'a> Renderer<'a> {
 
     /// The iteration state (J_j, win_j of every patch) as bytes.
     pub fn read_state(&self) -> Result<Vec<u8>> {
-        let b = &self.buffers.state;
-        crate::gpu::buffers::read_back(&self.ctx.device, &self.ctx.queue, b, b.size())
+        let mut out = Vec::with_capacity(self.buffers.state.size() as usize);
+        for b in &self.buffers.state.pages {
+            out.extend(crate::gpu::buffers::read_back::<u8>(&self.ctx.device, &self.ctx.queue, b, b.size())?);
+        }
+        Ok(out)
     }
 
     /// The image of the first view so far: the mean of the estimates.
@@ -964,7 +1004,7 @@ impl<'a> Renderer<'a> {
         if c.state.len() as u64 != self.buffers.state.size() || c.image_sum.len() as u64 != sums {
             return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
         }
-        self.ctx.queue.write_buffer(&self.buffers.state, 0, &c.state);
+        self.buffers.state.write(&self.ctx.queue, &c.state);
         let mut at = 0;
         for sum in self.views.iter().flat_map(|v| v.estimate.sum_buffers()) {
             let size = sum.size() as usize;
@@ -1002,7 +1042,8 @@ impl<'a> Renderer<'a> {
             });
             (b.clone(), copy)
         };
-        let mut kept = vec![backup(&self.buffers.state, "firstshot.render.state_backup")];
+        let mut kept: Vec<_> =
+            self.buffers.state.pages.iter().map(|b| backup(b, "firstshot.render.state_backup")).collect();
         kept.extend(
             self.views
                 .iter()

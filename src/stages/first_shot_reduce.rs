@@ -22,7 +22,7 @@ pub const SPEC: KernelSpec = KernelSpec {
         uniform::<GpuFaceParams>("params"),
         // reduce_face: the face's item buffer.
         uint_texture("item_buffer"),
-        read::<GpuPatch>("patches"),
+        read::<GpuPatch>("patches").paged(crate::gpu::scene_buffers::PATCH_TABLE.pages),
         read::<GpuLightSample>("samples"),
         // lo, hi per patch.
         read_write::<[u32; 2]>("sums"),
@@ -84,7 +84,7 @@ impl FirstShotReduce {
                 ("face", (&faces.camera).into()),
                 ("params", (&face_params).into()),
                 ("item_buffer", (&faces.ids_view).into()),
-                ("patches", (&scene.patches).into()),
+                ("patches", scene.patches.resource()),
                 ("samples", (&scene.samples).into()),
                 ("sums", (&sums).into()),
                 ("append", (&append_params).into()),

@@ -2,7 +2,7 @@
 //! row in ascending sample order, and each row's irradiance sum for diffuse patches.
 
 use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
-use crate::gpu::scene_buffers::FirstShotTable;
+use crate::gpu::scene_buffers::{FIRST_SHOT_IRRADIANCE, FirstShotTable};
 use crate::gpu::{buffers, kernel};
 use crate::layout::GpuLightSample;
 use crate::stages::prefix_sum::PrefixSum;
@@ -29,7 +29,7 @@ pub const SPEC: KernelSpec = KernelSpec {
         read_write::<[u32; 2]>("entries"),
         read::<GpuLightSample>("samples"),
         // rgb sum_i S_i r_ij per patch.
-        read_write::<[f32; 4]>("irradiance"),
+        read_write::<[f32; 4]>("irradiance").paged(FIRST_SHOT_IRRADIANCE.pages),
     ]],
 };
 
@@ -44,12 +44,20 @@ pub fn build(
     pair_total: u32,
     row_counts: &wgpu::Buffer,
     samples: &wgpu::Buffer,
+    page_bytes: u64,
 ) -> (FirstShotTable, Vec<wgpu::Buffer>, PrefixSum) {
     let n = patch_count as u64;
     let usage = wgpu::BufferUsages::COPY_SRC;
     let offsets = buffers::storage_zeroed(device, "firstshot.first_shot.offsets", 4 * (n + 1), usage);
     let entries = buffers::storage_zeroed(device, "firstshot.first_shot.entries", 8 * pair_total.max(1) as u64, usage);
-    let irradiance = buffers::storage_zeroed(device, "firstshot.first_shot.irradiance", 16 * n, usage);
+    let irradiance = crate::gpu::scene_buffers::Paged::zeroed(
+        device,
+        "firstshot.first_shot.irradiance",
+        FIRST_SHOT_IRRADIANCE,
+        n,
+        page_bytes,
+        usage,
+    );
     let cursor =
         buffers::storage_zeroed(device, "firstshot.first_shot_table.cursor", 4 * n, wgpu::BufferUsages::empty());
     let params = buffers::uniform(device, "firstshot.first_shot_table.params", &[pair_total, patch_count, 0, 0]);
@@ -67,7 +75,7 @@ pub fn build(
             ("cursor", (&cursor).into()),
             ("entries", (&entries).into()),
             ("samples", samples.into()),
-            ("irradiance", (&irradiance).into()),
+            ("irradiance", irradiance.resource()),
         ],
     );
     for (entry, invocations) in [("fill_rows", pair_total), ("sort_rows", patch_count), ("row_irradiance", patch_count)]
