@@ -169,7 +169,7 @@ pub fn run(
     let max_pairs = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / 16;
     // Every pair fits when each patch sees every sample; start there when that is small,
     // else grow on overflow below.
-    let mut capacity = (n * samples).clamp(1, 1 << 22).min(max_pairs) as u32;
+    let mut capacity = crate::memory::initial_pair_capacity(&limits, n, samples) as u32;
     let near = buffers.radius * 1e-6;
     let item_buffer = CameraItemBuffer::new(device, resolution, resolution);
     loop {

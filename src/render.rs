@@ -62,6 +62,9 @@ pub struct RenderOptions {
     /// (`scene_buffers::PerPatch`); `None`: one storage binding of the device. Set only by
     /// tests, to emulate a smaller device and check that pages change nothing.
     pub page_bytes: Option<u64>,
+    /// Refuse a run predicted to need more host memory than this many bytes (`memory`);
+    /// `None`: what the host has available (`MemAvailable`).
+    pub memory_limit: Option<u64>,
     /// Initial fragment room of a bundle step; `None` takes the geometric bound, which no
     /// step exceeds. Tests set it small to exercise the overflow-and-redo path.
     pub bundle_capacity: Option<u64>,
@@ -98,6 +101,7 @@ impl RenderOptions {
             bundle_capacity: None,
             image_band_rows: None,
             page_bytes: None,
+            memory_limit: None,
             shadow_resolution: scene.settings.hemicube_resolution,
             direct_passes: DEFAULT_DIRECT_PASSES,
             burn_in: None,
@@ -165,6 +169,9 @@ pub struct RenderStats {
     /// their atlases.
     pub shadow_resolution: u32,
     pub shadow_atlas_texels: u64,
+    /// The memory predicted before any GPU work, and the peak resident set reached
+    /// (`memory::MemoryPlan`).
+    pub memory: crate::memory::MemoryPlan,
     pub bundle_resolution: u32,
     /// Fragment capacity of a bundle step (grown if a step ever needed more).
     pub bundle_capacity: u32,
@@ -285,6 +292,7 @@ pub fn fingerprint(scene: &Scene, options: &RenderOptions) -> u64 {
     options.bundle_capacity = None;
     options.image_band_rows = None;
     options.page_bytes = None;
+    options.memory_limit = None;
     crate::checkpoint::fnv1a(format!("{scene:?}\n{options:?}").as_bytes())
 }
 
@@ -396,6 +404,19 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
         fit("the ray-bundle line table", crate::iteration::line_table_bytes(r), "use a smaller --bundle-resolution")?;
     }
     Ok(())
+}
+
+/// The memory of a render of `patches` with `options` on `ctx` (`memory::predict`), against
+/// `options.memory_limit` or what the host has available.
+pub fn predict_memory(
+    ctx: &Context,
+    scene: &Scene,
+    patches: &Patches,
+    options: &RenderOptions,
+) -> crate::memory::MemoryPlan {
+    let cpu = ctx.summary.device_type == "Cpu";
+    let available = options.memory_limit.or_else(crate::memory::host_available);
+    crate::memory::predict(scene, patches, options, &ctx.limits(), cpu, available)
 }
 
 fn milliseconds(since: Instant) -> f64 {
@@ -570,6 +591,7 @@ pub struct Renderer<'a> {
     near: f64,
     patch_count: usize,
     light_samples: usize,
+    memory: crate::memory::MemoryPlan,
     upload_ms: f64,
     start: Instant,
 }
@@ -587,6 +609,8 @@ impl<'a> Renderer<'a> {
         let start = Instant::now();
         check_options(scene, options)?;
         check_limits(&ctx.limits(), patches, options)?;
+        let memory = predict_memory(ctx, scene, patches, options);
+        memory.check()?;
         let device = &ctx.device;
         let upload = Instant::now();
         let page = crate::gpu::scene_buffers::page_bytes(&ctx.limits(), options.page_bytes);
@@ -606,6 +630,13 @@ impl<'a> Renderer<'a> {
             let capacity = options
                 .bundle_capacity
                 .unwrap_or_else(|| fragment_bound(patches, buffers.radius, options.bundle_resolution));
+            // The bound of many small patches can exceed one binding while a step's
+            // fragments do not (they grow with the lines, not the patches): start at most at
+            // one binding, and grow only if a step needs it.
+            let capacity = match options.bundle_capacity {
+                Some(c) => c,
+                None => crate::memory::initial_fragment_capacity(&ctx.limits(), capacity),
+            };
             Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
         };
         let gathers = iteration.is_some();
@@ -640,6 +671,7 @@ impl<'a> Renderer<'a> {
             first_shot,
             patch_count: patches.patches.len(),
             light_samples: patches.samples.len(),
+            memory,
             upload_ms,
             start,
         })
@@ -908,6 +940,7 @@ impl<'a> Renderer<'a> {
                 first_shot_ms: fs.map_or(0.0, |f| f.ms),
                 shadow_resolution: self.direct.resolution,
                 shadow_atlas_texels: self.direct.atlas_texels(),
+                memory: crate::memory::MemoryPlan { peak_rss_bytes: crate::memory::peak_rss(), ..self.memory.clone() },
                 bundle_resolution: o.bundle_resolution,
                 bundle_capacity: iteration_stats.capacity,
                 iteration_ms_median: iteration_stats.step_ms_median,
