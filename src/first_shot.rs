@@ -229,16 +229,8 @@ pub fn run(
         }
         let mut encoder = device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.first_shot.table") });
-        let (table, _temporaries, _scan) = first_shot_table::build(
-            device,
-            &mut encoder,
-            buffers.patch_count,
-            &reduce.pairs,
-            total,
-            &reduce.row_counts,
-            &buffers.samples,
-            buffers.page_bytes,
-        );
+        let (table, _temporaries, _scan) =
+            first_shot_table::build(device, &mut encoder, buffers, &reduce.pairs, total, &reduce.row_counts);
         ctx.queue.submit([encoder.finish()]);
         ctx.wait()?;
         buffers.first_shot = table;

@@ -2,7 +2,7 @@
 //! row in ascending sample order, and each row's irradiance sum for diffuse patches.
 
 use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
-use crate::gpu::scene_buffers::{FIRST_SHOT_IRRADIANCE, FirstShotTable};
+use crate::gpu::scene_buffers::{FIRST_SHOT_IRRADIANCE, FirstShotTable, SceneBuffers};
 use crate::gpu::{buffers, kernel};
 use crate::layout::GpuLightSample;
 use crate::stages::prefix_sum::PrefixSum;
@@ -36,16 +36,16 @@ pub const SPEC: KernelSpec = KernelSpec {
 /// Records the build of the table from `pair_total` pairs, the row counts (patch_count + 1
 /// u32, the last 0) and the light samples, and returns it with the temporaries the
 /// recorded commands still use (keep them until the commands are submitted).
+/// `scene` gives the patch count, the light samples and the page size of the irradiance.
 pub fn build(
     device: &wgpu::Device,
     encoder: &mut wgpu::CommandEncoder,
-    patch_count: u32,
+    scene: &SceneBuffers,
     pairs: &wgpu::Buffer,
     pair_total: u32,
     row_counts: &wgpu::Buffer,
-    samples: &wgpu::Buffer,
-    page_bytes: u64,
 ) -> (FirstShotTable, Vec<wgpu::Buffer>, PrefixSum) {
+    let (patch_count, samples, page_bytes) = (scene.patch_count, &scene.samples, scene.page_bytes);
     let n = patch_count as u64;
     let usage = wgpu::BufferUsages::COPY_SRC;
     let offsets = buffers::storage_zeroed(device, "firstshot.first_shot.offsets", 4 * (n + 1), usage);
