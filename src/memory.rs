@@ -79,10 +79,16 @@ pub fn initial_fragment_capacity(limits: &wgpu::Limits, bound: u64) -> u64 {
     bound.min(limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / BYTES_PER_FRAGMENT)
 }
 
+/// The most first-shot pairs a device holds, the list in pages of at most `page_bytes`
+/// (`scene_buffers::FIRST_SHOT_PAIRS`) and the table's entries (8 bytes a pair) in one binding.
+pub fn max_pairs(limits: &wgpu::Limits, page_bytes: u64) -> u64 {
+    let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    crate::gpu::scene_buffers::FIRST_SHOT_PAIRS.capacity(page_bytes).min(binding / 8)
+}
+
 /// The first capacity of the first shot's pair list (`first_shot::run`).
-pub fn initial_pair_capacity(limits: &wgpu::Limits, patches: u64, samples: u64) -> u64 {
-    let max_pairs = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / 16;
-    (patches * samples).clamp(1, 1 << 22).min(max_pairs)
+pub fn initial_pair_capacity(limits: &wgpu::Limits, page_bytes: u64, patches: u64, samples: u64) -> u64 {
+    (patches * samples).clamp(1, 1 << 22).min(max_pairs(limits, page_bytes))
 }
 
 /// The memory of a render of `patches` with `options` on a device with `limits`;
@@ -110,7 +116,10 @@ pub fn predict(
         }
     };
     let first_shot_pairs = match options.first_shot {
-        true => initial_pair_capacity(limits, n, patches.samples.len() as u64),
+        true => {
+            let page = crate::gpu::scene_buffers::page_bytes(limits, options.page_bytes);
+            initial_pair_capacity(limits, page, n, patches.samples.len() as u64)
+        }
         false => 0,
     };
     let hemicube = match options.first_shot {

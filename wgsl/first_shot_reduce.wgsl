@@ -88,6 +88,6 @@ fn append_sample(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
     row_counts[j] += 1u;
     let slot = atomicAdd(&pair_count, 1u);
     if (slot < append.capacity) {
-        pairs[slot] = vec4<u32>(j, append.sample, bitcast<u32>(r), 0u);
+        pairs_set(slot, vec4<u32>(j, append.sample, bitcast<u32>(r), 0u));
     }
 }

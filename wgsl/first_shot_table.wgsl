@@ -23,7 +23,7 @@ fn fill_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     if (k >= params.x) {
         return;
     }
-    let pair = pairs[k];
+    let pair = pairs_at(k);
     let slot = offsets[pair.x] + atomicAdd(&cursor[pair.x], 1u);
     entries[slot] = pair.yz;
 }

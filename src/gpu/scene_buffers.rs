@@ -42,6 +42,14 @@ pub const OUTGOING: PerPatch = PerPatch { what: "the outgoing radiance", bytes: 
 pub const TRANSFER_SUMS: PerPatch = PerPatch { what: "the transfer sums", bytes: 24, pages: 2 };
 /// The first shot's irradiance per patch (vec4).
 pub const FIRST_SHOT_IRRADIANCE: PerPatch = PerPatch { what: "the first-shot irradiance", bytes: 16, pages: 2 };
+/// The first shot's list of (patch, sample, r_ij) pairs (vec4<u32> a pair; "patches" are
+/// pairs here), appended to at random: bounded by the lights' windows, not the patches, but
+/// 45 faces of 512 x 512 can see more pairs than one 128 MiB binding holds (8.4 M). Not in
+/// `PAGED_ARRAYS`: its length is known only once the first shot ran (`first_shot::run`).
+/// 8 pages, so that a page as small as the patch table's holds a scene's pairs (4 to 5 a
+/// patch in the Cornell box); the table's entries (8 bytes a pair, one binding) then bound
+/// the pairs (`memory::max_pairs`: 16.7 M on lavapipe).
+pub const FIRST_SHOT_PAIRS: PerPatch = PerPatch { what: "the first-shot pair list", bytes: 16, pages: 8 };
 /// Every paged per-patch array.
 pub const PAGED_ARRAYS: &[PerPatch] = &[PATCH_TABLE, PATCH_STATE, OUTGOING, TRANSFER_SUMS, FIRST_SHOT_IRRADIANCE];
 

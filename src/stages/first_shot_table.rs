@@ -20,7 +20,7 @@ pub const SPEC: KernelSpec = KernelSpec {
     groups: &[&[
         // x: pairs, y: patches.
         uniform::<[u32; 4]>("params"),
-        read::<[u32; 4]>("pairs"),
+        read::<[u32; 4]>("pairs").paged(crate::gpu::scene_buffers::FIRST_SHOT_PAIRS.pages),
         // patches + 1 row starts.
         read::<u32>("offsets"),
         // Zeroed before fill_rows.
@@ -41,7 +41,7 @@ pub fn build(
     device: &wgpu::Device,
     encoder: &mut wgpu::CommandEncoder,
     scene: &SceneBuffers,
-    pairs: &wgpu::Buffer,
+    pairs: &crate::gpu::scene_buffers::Paged,
     pair_total: u32,
     row_counts: &wgpu::Buffer,
 ) -> (FirstShotTable, Vec<wgpu::Buffer>, PrefixSum) {
@@ -70,7 +70,7 @@ pub fn build(
         0,
         &[
             ("params", (&params).into()),
-            ("pairs", pairs.into()),
+            ("pairs", pairs.resource()),
             ("offsets", (&offsets).into()),
             ("cursor", (&cursor).into()),
             ("entries", (&entries).into()),
