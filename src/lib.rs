@@ -27,7 +27,6 @@ pub mod gpu;
 pub mod image;
 pub mod iteration;
 pub mod layout;
-pub mod memory;
 pub mod merge;
 pub mod render;
 pub mod rng;
