@@ -416,7 +416,7 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
     // so the rules below decide, as they do where the ray hits nothing the line holds.
     if (hit.patch_id != NO_PATCH && dot(patches[hit.patch_id - 1u].normal.xyz, toward) < 0.0) {
         let m = hit.patch_id - 1u;
-        return image_outgoing[m].rgb + emitted_share(m, x, toward);
+        return image_outgoing_at(m).rgb + emitted_share(m, x, toward);
     }
     // Failing that, the nearest of the next four fragments in the direction of travel, by
     // the exact distance from x along the ray to each one's plane. Unrolled: a CPU adapter
