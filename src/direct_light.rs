@@ -115,6 +115,12 @@ pub struct DirectLights {
     bounds: (DVec3, f64),
 }
 
+/// The face side asked of the lights' windows: `options.shadow_resolution`, else
+/// `auto_resolution` (before the atlas budget, which may halve it).
+pub fn shadow_resolution(scene: &Scene, patches: &Patches, options: &RenderOptions) -> u32 {
+    options.shadow_resolution.unwrap_or_else(|| auto_resolution(scene, patches, options.hemicube_resolution))
+}
+
 /// The face side of the per-pixel direct light's windows when none is asked for: at least
 /// `floor` (the hemicube resolution), and enough for a typical patch, seen from the light
 /// that needs it most, to be `TEXELS_PER_PATCH` texels across.
@@ -220,8 +226,7 @@ impl DirectLights {
         options: &RenderOptions,
     ) -> Self {
         let (first_shot, window, seed) = (options.first_shot, options.light_window, options.seed);
-        let resolution =
-            options.shadow_resolution.unwrap_or_else(|| auto_resolution(scene, patches, options.hemicube_resolution));
+        let resolution = shadow_resolution(scene, patches, options);
         let mut sources = Vec::new();
         for (l, light) in scene.lights.iter().enumerate().filter(|_| first_shot) {
             match *light {

@@ -166,10 +166,10 @@ pub fn run(
     let limits = ctx.limits();
     let n = buffers.patch_count as u64;
     let samples = patches.samples.len() as u64;
-    let max_pairs = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / 16;
+    let max_pairs = crate::memory::max_pairs(&limits, buffers.page_bytes);
     // Every pair fits when each patch sees every sample; start there when that is small,
     // else grow on overflow below.
-    let mut capacity = (n * samples).clamp(1, 1 << 22).min(max_pairs) as u32;
+    let mut capacity = crate::memory::initial_pair_capacity(&limits, buffers.page_bytes, n, samples) as u32;
     let near = buffers.radius * 1e-6;
     let item_buffer = CameraItemBuffer::new(device, resolution, resolution);
     loop {
@@ -219,7 +219,8 @@ pub fn run(
         if total > capacity {
             if total as u64 > max_pairs {
                 return Err(Error::Limits(format!(
-                    "the first shot found {total} (patch, light sample) pairs, more than one buffer of this device holds ({max_pairs}); use a larger --patch-size or fewer light subdivisions"
+                    "the first shot found {total} (patch, light sample) pairs, more than this device holds ({max_pairs}: {} pages of 16-byte pairs, and their table entries of 8 bytes in one binding); use a smaller --hemicube-resolution, a larger --patch-size or fewer light subdivisions",
+                    crate::gpu::scene_buffers::FIRST_SHOT_PAIRS.pages
                 )));
             }
             // The list was too short: pairs past its end were counted, not stored. Run
@@ -229,15 +230,8 @@ pub fn run(
         }
         let mut encoder = device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.first_shot.table") });
-        let (table, _temporaries, _scan) = first_shot_table::build(
-            device,
-            &mut encoder,
-            buffers.patch_count,
-            &reduce.pairs,
-            total,
-            &reduce.row_counts,
-            &buffers.samples,
-        );
+        let (table, _temporaries, _scan) =
+            first_shot_table::build(device, &mut encoder, buffers, &reduce.pairs, total, &reduce.row_counts);
         ctx.queue.submit([encoder.finish()]);
         ctx.wait()?;
         buffers.first_shot = table;

@@ -3,7 +3,7 @@
 //! `StepRng(seed, k)`, so the state between steps is only J_j, win_j and the image sum.
 
 use crate::gpu::profile::Stage;
-use crate::gpu::scene_buffers::SceneBuffers;
+use crate::gpu::scene_buffers::{OUTGOING, SceneBuffers, TRANSFER_SUMS};
 use crate::gpu::{Context, buffers};
 use crate::layout::GpuBundle;
 use crate::rng::StepRng;
@@ -104,7 +104,8 @@ pub struct GatherBuffers {
     pub bundle: wgpu::Buffer,
     pub offsets: wgpu::Buffer,
     pub fragments: wgpu::Buffer,
-    pub image_outgoing: wgpu::Buffer,
+    /// Its pages (`scene_buffers::OUTGOING`).
+    pub image_outgoing: Vec<wgpu::Buffer>,
 }
 
 /// The buffers and stages of a step.
@@ -148,8 +149,9 @@ impl Iteration {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let outgoing = buffers::storage_zeroed(device, "firstshot.iteration.outgoing", 16 * n, none);
-        let image_outgoing = buffers::storage_zeroed(device, "firstshot.iteration.image_outgoing", 16 * n, none);
+        let (pages, paged) = (scene.page_bytes, crate::gpu::scene_buffers::Paged::zeroed);
+        let outgoing = paged(device, "firstshot.iteration.outgoing", OUTGOING, n, pages, none);
+        let image_outgoing = paged(device, "firstshot.iteration.image_outgoing", OUTGOING, n, pages, none);
         let max_bits = buffers::storage_zeroed(device, "firstshot.iteration.max_bits", 16, none);
         let counts = buffers::storage_zeroed(device, "firstshot.iteration.counts", 4 * (lines as u64 + 1), none);
         // COPY_SRC: `fragments` reads its last entry back.
@@ -162,26 +164,52 @@ impl Iteration {
         let cursor = buffers::storage_zeroed(device, "firstshot.iteration.cursor", 4 * lines as u64, none);
         let fragments = buffers::storage_zeroed(device, "firstshot.iteration.fragments", 8 * capacity.max(1), none);
         let overflow = buffers::storage_zeroed(device, "firstshot.iteration.overflow", 4, wgpu::BufferUsages::COPY_SRC);
-        let sums = buffers::storage_zeroed(device, "firstshot.iteration.sums", 24 * n, none);
+        let sums = paged(device, "firstshot.iteration.sums", TRANSFER_SUMS, n, pages, none);
         Ok(Iteration {
             reflect: BundleReflect::new(device, scene, &bundle, &outgoing, &max_bits, &image_outgoing),
             visibility: BundleVisibility::new(
                 device,
-                [&bundle, &counts, &offsets, &cursor, &fragments, &overflow, &outgoing],
+                [
+                    (&bundle).into(),
+                    (&counts).into(),
+                    (&offsets).into(),
+                    (&cursor).into(),
+                    (&fragments).into(),
+                    (&overflow).into(),
+                    outgoing.resource(),
+                ],
                 resolution,
             ),
             scan: PrefixSum::new(device, lines + 1, &counts, &offsets),
-            transfer: BundleTransfer::new(device, [&bundle, &offsets, &fragments, &outgoing, &sums, &max_bits], lines),
+            transfer: BundleTransfer::new(
+                device,
+                [
+                    (&bundle).into(),
+                    (&offsets).into(),
+                    (&fragments).into(),
+                    outgoing.resource(),
+                    sums.resource(),
+                    (&max_bits).into(),
+                ],
+                lines,
+            ),
             finalize: BundleFinalize::new(
                 device,
-                [&bundle, &scene.patches, &sums, &max_bits, &outgoing, &scene.state],
+                [
+                    (&bundle).into(),
+                    scene.patches.resource(),
+                    sums.resource(),
+                    (&max_bits).into(),
+                    outgoing.resource(),
+                    scene.state.resource(),
+                ],
                 scene.patch_count,
             ),
             gather: GatherBuffers {
                 bundle: bundle.clone(),
                 offsets: offsets.clone(),
                 fragments: fragments.clone(),
-                image_outgoing: image_outgoing.clone(),
+                image_outgoing: image_outgoing.pages.clone(),
             },
             bundle,
             counts,
@@ -191,7 +219,7 @@ impl Iteration {
             offsets: offsets.clone(),
             capacity: capacity as u32,
             resolution,
-            _owned: vec![outgoing, image_outgoing, offsets, fragments, sums],
+            _owned: [outgoing.pages, image_outgoing.pages, vec![offsets, fragments], sums.pages].concat(),
         })
     }
 

@@ -27,6 +27,7 @@ pub mod gpu;
 pub mod image;
 pub mod iteration;
 pub mod layout;
+pub mod memory;
 pub mod merge;
 pub mod render;
 pub mod rng;

@@ -160,6 +160,10 @@ pub(crate) struct RenderArgs {
     /// Write run statistics as JSON.
     #[arg(long, value_name = "PATH")]
     stats: Option<PathBuf>,
+    /// Refuse, before any GPU work, a run predicted to need more host memory than this many
+    /// MiB (GPU memory included on a CPU adapter). Default: the host's available memory.
+    #[arg(long, value_name = "MIB")]
+    memory_limit: Option<u64>,
     /// No progress output.
     #[arg(long)]
     quiet: bool,
@@ -440,6 +444,7 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
         options.direct_passes = v;
     }
     options.burn_in = args.burn_in.or(options.burn_in);
+    options.memory_limit = args.memory_limit.map(|mib| mib << 20);
     if let Some(v) = args.window_steps {
         if v == 0 {
             return Err(usage("--window-steps 0: expected at least 1 step".into()));
@@ -586,6 +591,9 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     let ctx = Context::new(&args.adapter)?;
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
     say.say(format!("adapter: {}", ctx.summary));
+    let memory = firstshot::render::predict_memory(&ctx, &scene, &patches, &options);
+    say.say(memory.summary());
+    memory.check()?;
     if stop.requested() {
         return Err(interrupted(&stop, "before the render began; nothing was written".into()));
     }

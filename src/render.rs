@@ -58,6 +58,13 @@ pub struct RenderOptions {
     /// Rows per band of the image sum; `None`: as many as one storage binding holds
     /// (`image_estimate::band_rows`). Set only by tests, to check that bands change nothing.
     pub image_band_rows: Option<u32>,
+    /// Largest page, in bytes, of the per-patch arrays split over several buffers
+    /// (`scene_buffers::PerPatch`); `None`: one storage binding of the device. Set only by
+    /// tests, to emulate a smaller device and check that pages change nothing.
+    pub page_bytes: Option<u64>,
+    /// Refuse a run predicted to need more host memory than this many bytes (`memory`);
+    /// `None`: what the host has available (`MemAvailable`).
+    pub memory_limit: Option<u64>,
     /// Initial fragment room of a bundle step; `None` takes the geometric bound, which no
     /// step exceeds. Tests set it small to exercise the overflow-and-redo path.
     pub bundle_capacity: Option<u64>,
@@ -94,6 +101,8 @@ impl RenderOptions {
             time_limit: None,
             bundle_capacity: None,
             image_band_rows: None,
+            page_bytes: None,
+            memory_limit: None,
             shadow_resolution: None,
             direct_passes: DEFAULT_DIRECT_PASSES,
             burn_in: None,
@@ -161,6 +170,9 @@ pub struct RenderStats {
     /// their atlases.
     pub shadow_resolution: u32,
     pub shadow_atlas_texels: u64,
+    /// The memory predicted before any GPU work, and the peak resident set reached
+    /// (`memory::MemoryPlan`).
+    pub memory: crate::memory::MemoryPlan,
     pub bundle_resolution: u32,
     /// Fragment capacity of a bundle step (grown if a step ever needed more).
     pub bundle_capacity: u32,
@@ -280,6 +292,8 @@ pub fn fingerprint(scene: &Scene, options: &RenderOptions) -> u64 {
     options.time_limit = None;
     options.bundle_capacity = None;
     options.image_band_rows = None;
+    options.page_bytes = None;
+    options.memory_limit = None;
     crate::checkpoint::fnv1a(format!("{scene:?}\n{options:?}").as_bytes())
 }
 
@@ -321,10 +335,40 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
     if n > MAX_PATCHES as u64 {
         return Err(Error::Limits(format!("{n} patches exceed the limit of {MAX_PATCHES}; use a larger --patch-size")));
     }
-    let fewer = "use a larger --patch-size or a GPU with more memory";
-    fit("the patch table", n * std::mem::size_of::<GpuPatch>() as u64, fewer)?;
-    fit("the rasterised triangles", n * 3 * std::mem::size_of::<RasterVertex>() as u64, fewer)?;
-    fit("the iteration state", n * std::mem::size_of::<GpuPatchState>() as u64, fewer)?;
+    // Every kernel's storage bindings, the pages of the paged arrays included.
+    let per_stage = limits.max_storage_buffers_per_shader_stage;
+    if let Some(spec) = crate::stages::SPECS.iter().find(|s| crate::gpu::bindings::storage_buffers(s) > per_stage) {
+        return Err(Error::Limits(format!(
+            "the kernel {} binds {} storage buffers (the pages of its per-patch arrays included), the device allows {per_stage} per shader stage (max_storage_buffers_per_shader_stage); use an adapter that allows more",
+            spec.stem,
+            crate::gpu::bindings::storage_buffers(spec)
+        )));
+    }
+    let fewer = "use a larger --patch-size (or a coarser tessellation) or a GPU with more memory";
+    // The per-patch arrays of more than 8 bytes a patch are split over pages, a buffer each
+    // (`scene_buffers::PerPatch`): at most `pages` of them.
+    let page = crate::gpu::scene_buffers::page_bytes(limits, options.page_bytes);
+    for array in crate::gpu::scene_buffers::PAGED_ARRAYS {
+        let capacity = array.capacity(page);
+        if n > capacity {
+            return Err(Error::Limits(format!(
+                "{n} patches: {} ({} bytes a patch) holds at most {capacity} patches on this device, in {} pages of {} patches (a page at most {page} bytes: max_storage_buffer_binding_size {binding}, max_buffer_size {buffer}); {fewer}",
+                array.what,
+                array.bytes,
+                array.pages,
+                array.patches_per_page(page)
+            )));
+        }
+    }
+    // The rest are one buffer each: the first shot's sums (8 bytes a patch) and row counts
+    // one binding, the triangles a vertex buffer (never bound as storage).
+    fit("the first shot's per-patch sums", n * 8, fewer)?;
+    let triangles = n * 3 * std::mem::size_of::<RasterVertex>() as u64;
+    if triangles > buffer {
+        return Err(Error::Limits(format!(
+            "the rasterised triangles need {triangles} bytes in one vertex buffer, the device allows {buffer} (max_buffer_size); {fewer}"
+        )));
+    }
     let max_dim = limits.max_texture_dimension_2d;
     let sizes = match options.cameras.is_empty() {
         true => vec![(options.width, options.height)],
@@ -361,6 +405,19 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
         fit("the ray-bundle line table", crate::iteration::line_table_bytes(r), "use a smaller --bundle-resolution")?;
     }
     Ok(())
+}
+
+/// The memory of a render of `patches` with `options` on `ctx` (`memory::predict`), against
+/// `options.memory_limit` or what the host has available.
+pub fn predict_memory(
+    ctx: &Context,
+    scene: &Scene,
+    patches: &Patches,
+    options: &RenderOptions,
+) -> crate::memory::MemoryPlan {
+    let cpu = ctx.summary.device_type == "Cpu";
+    let available = options.memory_limit.or_else(crate::memory::host_available);
+    crate::memory::predict(scene, patches, options, &ctx.limits(), cpu, available)
 }
 
 fn milliseconds(since: Instant) -> f64 {
@@ -451,7 +508,7 @@ pub fn render_path(
         if s.state.len() as u64 != renderer.buffers.state.size() {
             return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
         }
-        ctx.queue.write_buffer(&renderer.buffers.state, 0, s.state);
+        renderer.buffers.state.write(&ctx.queue, s.state);
         step = s.step;
     }
     let mut step_ms = Vec::new();
@@ -535,6 +592,7 @@ pub struct Renderer<'a> {
     near: f64,
     patch_count: usize,
     light_samples: usize,
+    memory: crate::memory::MemoryPlan,
     upload_ms: f64,
     start: Instant,
 }
@@ -552,9 +610,12 @@ impl<'a> Renderer<'a> {
         let start = Instant::now();
         check_options(scene, options)?;
         check_limits(&ctx.limits(), patches, options)?;
+        let memory = predict_memory(ctx, scene, patches, options);
+        memory.check()?;
         let device = &ctx.device;
         let upload = Instant::now();
-        let mut buffers = SceneBuffers::new(device, scene, patches, options.first_shot);
+        let page = crate::gpu::scene_buffers::page_bytes(&ctx.limits(), options.page_bytes);
+        let mut buffers = SceneBuffers::with_pages(device, scene, patches, options.first_shot, page);
         let upload_ms = milliseconds(upload);
         let first_shot = if !options.first_shot || patches.samples.is_empty() {
             None
@@ -570,6 +631,13 @@ impl<'a> Renderer<'a> {
             let capacity = options
                 .bundle_capacity
                 .unwrap_or_else(|| fragment_bound(patches, buffers.radius, options.bundle_resolution));
+            // The bound of many small patches can exceed one binding while a step's
+            // fragments do not (they grow with the lines, not the patches): start at most at
+            // one binding, and grow only if a step needs it.
+            let capacity = match options.bundle_capacity {
+                Some(c) => c,
+                None => crate::memory::initial_fragment_capacity(&ctx.limits(), capacity),
+            };
             Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
         };
         let gathers = iteration.is_some();
@@ -604,6 +672,7 @@ impl<'a> Renderer<'a> {
             first_shot,
             patch_count: patches.patches.len(),
             light_samples: patches.samples.len(),
+            memory,
             upload_ms,
             start,
         })
@@ -795,8 +864,11 @@ impl<'a> Renderer<'a> {
 
     /// The iteration state (J_j, win_j of every patch) as bytes.
     pub fn read_state(&self) -> Result<Vec<u8>> {
-        let b = &self.buffers.state;
-        crate::gpu::buffers::read_back(&self.ctx.device, &self.ctx.queue, b, b.size())
+        let mut out = Vec::with_capacity(self.buffers.state.size() as usize);
+        for b in &self.buffers.state.pages {
+            out.extend(crate::gpu::buffers::read_back::<u8>(&self.ctx.device, &self.ctx.queue, b, b.size())?);
+        }
+        Ok(out)
     }
 
     /// The image of the first view so far: the mean of the estimates.
@@ -869,6 +941,7 @@ impl<'a> Renderer<'a> {
                 first_shot_ms: fs.map_or(0.0, |f| f.ms),
                 shadow_resolution: self.direct.resolution,
                 shadow_atlas_texels: self.direct.atlas_texels(),
+                memory: crate::memory::MemoryPlan { peak_rss_bytes: crate::memory::peak_rss(), ..self.memory.clone() },
                 bundle_resolution: o.bundle_resolution,
                 bundle_capacity: iteration_stats.capacity,
                 iteration_ms_median: iteration_stats.step_ms_median,
@@ -965,7 +1038,7 @@ impl<'a> Renderer<'a> {
         if c.state.len() as u64 != self.buffers.state.size() || c.image_sum.len() as u64 != sums {
             return Err(Error::Usage("the checkpoint's state does not fit this scene; run without --resume".into()));
         }
-        self.ctx.queue.write_buffer(&self.buffers.state, 0, &c.state);
+        self.buffers.state.write(&self.ctx.queue, &c.state);
         let mut at = 0;
         for sum in self.views.iter().flat_map(|v| v.estimate.sum_buffers()) {
             let size = sum.size() as usize;
@@ -1003,7 +1076,8 @@ impl<'a> Renderer<'a> {
             });
             (b.clone(), copy)
         };
-        let mut kept = vec![backup(&self.buffers.state, "firstshot.render.state_backup")];
+        let mut kept: Vec<_> =
+            self.buffers.state.pages.iter().map(|b| backup(b, "firstshot.render.state_backup")).collect();
         kept.extend(
             self.views
                 .iter()

@@ -142,9 +142,10 @@ fn test03_no_first_shot_with_a_point_light_is_a_usage_error() {
 }
 
 /// The stats keys of CLI.md.
-const STATS_KEYS: [&str; 12] = [
+const STATS_KEYS: [&str; 13] = [
     "adapter",
     "patches",
+    "memory",
     "light_samples",
     "image",
     "hemicube_resolution",
@@ -216,6 +217,37 @@ fn test04_tiny_render_writes_exr_png_and_stats() {
     for key in ["first_shot_ms", "iteration_ms_median", "total_ms"] {
         assert!(json[key].as_f64().is_some_and(|ms| ms >= 0.0), "{key}:\n{text}");
     }
+    // The memory predicted before any GPU work, and the peak the run reached.
+    let memory = &json["memory"];
+    assert_eq!(memory["patches"], json["patches"], "{text}");
+    assert_eq!(memory["pixels"], 32 * 32, "{text}");
+    assert_eq!(memory["lines"], 0, "no iteration: {text}");
+    let bytes = |key: &str| memory[key].as_u64().unwrap_or_else(|| panic!("memory.{key}:\n{text}"));
+    assert!(bytes("device_bytes_per_patch") >= 300 && bytes("device_bytes") > 0, "{text}");
+    assert!(bytes("total_host_bytes") >= bytes("host_bytes"), "{text}");
+    assert!(bytes("peak_rss_bytes") > 0 && bytes("available_bytes") > 0, "{text}");
+}
+
+#[test]
+fn test04b_a_run_predicted_not_to_fit_is_refused_before_any_work() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let scratch = Scratch::new("cli", "memory-refusals");
+    let cb = cornell_box();
+    // Whatever dominates, the message gives the figures and the flag to change.
+    let err = refused_render(&scratch, &[&cb, "--memory-limit", "1", "--iterations", "0"], "cb.exr");
+    for part in ["host memory", "1 MiB are available", "patches (", "pixels (", "--memory-limit"] {
+        assert!(err.contains(part), "{err:?} lacks {part:?}");
+    }
+    // An image far larger than the limit names the image size.
+    let big = ["--width", "4096", "--height", "4096", "--memory-limit", "1024", "--iterations", "0"];
+    let err = refused_render(&scratch, &[&[cb.as_str()][..], &big[..]].concat(), "cb.exr");
+    assert!(err.contains("16777216 pixels") && err.contains("--width/--height"), "{err}");
+    // A fine tessellation names the patch size.
+    let fine = ["--patch-size", "2", "--width", "32", "--height", "32", "--memory-limit", "1024", "--iterations", "0"];
+    let err = refused_render(&scratch, &[&[cb.as_str()][..], &fine[..]].concat(), "cb.exr");
+    assert!(err.contains("--patch-size"), "{err}");
 }
 
 /// wgpu's names of its backends (`wgpu::Backend`'s Debug form).

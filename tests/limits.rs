@@ -5,7 +5,8 @@
 mod common;
 
 use firstshot::Error;
-use firstshot::layout::{GpuPatch, GpuPatchState, RasterVertex};
+use firstshot::gpu::scene_buffers::{PAGED_ARRAYS, PATCH_TABLE};
+use firstshot::layout::{GpuPatch, RasterVertex};
 use firstshot::render::{RenderOptions, check_limits};
 use firstshot::scene::{self, Patches};
 
@@ -21,9 +22,20 @@ fn cornell_box() -> (Patches, RenderOptions) {
     (patches, options)
 }
 
-/// wgpu's defaults with every buffer and binding allowed `bytes`.
+/// wgpu's defaults, with the storage buffers per shader stage of lavapipe (the kernels bind
+/// the pages of their per-patch arrays: more than wgpu's default of 8).
+fn defaults() -> wgpu::Limits {
+    wgpu::Limits { max_storage_buffers_per_shader_stage: 32, ..Default::default() }
+}
+
+/// `defaults` with every buffer and binding allowed `bytes`.
 fn buffers_of(bytes: u64) -> wgpu::Limits {
-    wgpu::Limits { max_storage_buffer_binding_size: bytes, max_buffer_size: bytes, ..Default::default() }
+    wgpu::Limits { max_storage_buffer_binding_size: bytes, max_buffer_size: bytes, ..defaults() }
+}
+
+/// `defaults` with every storage binding allowed `bytes` (buffers as large as wgpu's default).
+fn bindings_of(bytes: u64) -> wgpu::Limits {
+    wgpu::Limits { max_storage_buffer_binding_size: bytes, ..defaults() }
 }
 
 /// Asserts a `Error::Limits` refusal whose message holds every one of `parts`.
@@ -40,21 +52,21 @@ fn refused(result: firstshot::Result<()>, parts: &[&str]) {
     }
 }
 
-/// The per-patch buffers that check_limits sizes, in the order it checks them.
-fn scene_buffers(patches: &Patches) -> [(&'static str, u64); 3] {
+/// The smallest binding that holds every paged per-patch array of `patches` (each in at
+/// most its pages of whole patches), and the first array that needs it.
+fn smallest_binding(patches: &Patches) -> (&'static str, u64) {
     let n = patches.patches.len() as u64;
-    [
-        ("the patch table", n * size_of::<GpuPatch>() as u64),
-        ("the rasterised triangles", n * 3 * size_of::<RasterVertex>() as u64),
-        ("the iteration state", n * size_of::<GpuPatchState>() as u64),
-    ]
+    PAGED_ARRAYS
+        .iter()
+        .map(|a| (a.what, n.div_ceil(a.pages as u64) * a.bytes))
+        .fold(("", 0), |a, b| if b.1 > a.1 { b } else { a })
 }
 
 #[test]
 fn test01_the_cornell_box_fits_the_defaults() {
     let (patches, options) = cornell_box();
     assert!(patches.patches.len() > 1000, "a real scene: {} patches", patches.patches.len());
-    check_limits(&wgpu::Limits::default(), &patches, &options).expect("fits wgpu's default limits");
+    check_limits(&defaults(), &patches, &options).expect("fits wgpu's default limits");
 }
 
 #[test]
@@ -65,23 +77,35 @@ fn test02_tiny_buffers_refuse_the_scene_and_name_the_fix() {
         &["the patch table", "1024", "max_storage_buffer_binding_size", "--patch-size"],
     );
     // Either limit alone refuses it, and the message names the one that is small.
-    let binding = wgpu::Limits { max_storage_buffer_binding_size: 4096, ..Default::default() };
+    let binding = bindings_of(4096);
     refused(check_limits(&binding, &patches, &options), &["max_storage_buffer_binding_size 4096", "--patch-size"]);
-    let buffer = wgpu::Limits { max_buffer_size: 4096, ..Default::default() };
+    let buffer = wgpu::Limits { max_buffer_size: 4096, ..defaults() };
     refused(check_limits(&buffer, &patches, &options), &["max_buffer_size 4096", "--patch-size"]);
 }
 
 #[test]
-fn test03_the_largest_scene_buffer_fits_exactly_at_the_limit() {
+fn test03_the_per_patch_arrays_fit_their_pages_exactly_at_the_limit() {
+    // The per-patch arrays are split over pages of whole patches, at most `pages` of them:
+    // a binding of the largest page fits, one byte less takes a patch out of a page and
+    // refuses the first array that needs it, naming the figures.
     let (patches, options) = cornell_box();
-    let buffers = scene_buffers(&patches);
-    // The first of the largest is the one refused first.
-    let (largest, bytes) = buffers.iter().fold(buffers[0], |a, &b| if b.1 > a.1 { b } else { a });
-    check_limits(&buffers_of(bytes), &patches, &options).expect("a buffer of exactly the limit fits");
+    let n = patches.patches.len();
+    let (largest, bytes) = smallest_binding(&patches);
+    check_limits(&bindings_of(bytes), &patches, &options).expect("pages of exactly the limit fit");
     refused(
-        check_limits(&buffers_of(bytes - 1), &patches, &options),
-        &[largest, &format!("needs {bytes} bytes"), &format!("allows {}", bytes - 1), "--patch-size"],
+        check_limits(&bindings_of(bytes - 1), &patches, &options),
+        &[&format!("{n} patches: {largest}"), &format!("a page at most {} bytes", bytes - 1), "--patch-size"],
     );
+    // The same through the test knob that emulates a smaller device.
+    let knob = RenderOptions { page_bytes: Some(bytes - 1), ..options.clone() };
+    refused(check_limits(&defaults(), &patches, &knob), &[largest, "--patch-size"]);
+    // The triangles are one vertex buffer, limited by the largest buffer only.
+    let triangles = n as u64 * 3 * size_of::<RasterVertex>() as u64;
+    let buffer = wgpu::Limits { max_buffer_size: triangles - 1, ..defaults() };
+    refused(check_limits(&buffer, &patches, &options), &["the rasterised triangles", "max_buffer_size"]);
+    // A device with too few storage buffers per stage for the pages cannot run the kernels.
+    let few = wgpu::Limits { max_storage_buffers_per_shader_stage: 8, ..defaults() };
+    refused(check_limits(&few, &patches, &options), &["storage buffers", "max_storage_buffers_per_shader_stage"]);
 }
 
 #[test]
@@ -107,16 +131,19 @@ fn test04_hand_made_patches() {
         ..Default::default()
     };
     let options = RenderOptions { width: 2, height: 2, iterations: 0, ..cornell_box().1 };
-    let patch_table = 2 * size_of::<GpuPatch>() as u64;
-    check_limits(&buffers_of(patch_table), &patches, &options).expect("fits exactly");
-    refused(check_limits(&buffers_of(patch_table - 1), &patches, &options), &["the patch table", "--patch-size"]);
+    // A page holds one patch at least: one patch's 96 bytes (and its 96 bytes of triangles)
+    // fit, a byte less holds no patch.
+    let patch = size_of::<GpuPatch>() as u64;
+    assert_eq!(PATCH_TABLE.capacity(patch), 8);
+    check_limits(&buffers_of(patch), &patches, &options).expect("fits exactly");
+    refused(check_limits(&buffers_of(patch - 1), &patches, &options), &["the patch table", "--patch-size"]);
 }
 
 #[test]
 fn test05_an_image_wider_or_taller_than_a_texture_is_refused() {
     let (patches, options) = cornell_box();
     let options = RenderOptions { hemicube_resolution: 32, bundle_resolution: 32, ..options };
-    let limits = wgpu::Limits { max_texture_dimension_2d: 32, ..Default::default() };
+    let limits = wgpu::Limits { max_texture_dimension_2d: 32, ..defaults() };
     check_limits(&limits, &patches, &options).expect("32 x 32 fits a texture side of 32");
     for (width, height) in [(33, 32), (32, 33), (1000, 1)] {
         let o = RenderOptions { width, height, ..options.clone() };
@@ -129,27 +156,24 @@ fn test05_an_image_wider_or_taller_than_a_texture_is_refused() {
     // only a row (16 bytes a pixel) must fit one binding (here 1 MiB, a row of 65536).
     let wide = RenderOptions { width: 65536, height: 4096, ..options.clone() };
     let texture = 65536;
-    let limits = wgpu::Limits {
-        max_texture_dimension_2d: texture,
-        max_storage_buffer_binding_size: 1 << 20,
-        ..Default::default()
-    };
+    let limits =
+        wgpu::Limits { max_texture_dimension_2d: texture, max_storage_buffer_binding_size: 1 << 20, ..defaults() };
     check_limits(&limits, &patches, &wide).expect("one row fits a binding");
     assert_eq!(firstshot::stages::image_estimate::band_rows(&limits, 65536), 1);
     let limits = wgpu::Limits {
         max_texture_dimension_2d: texture,
         max_storage_buffer_binding_size: (1 << 20) - 1,
-        ..Default::default()
+        ..defaults()
     };
     refused(check_limits(&limits, &patches, &wide), &["a row of the image", "--width"]);
-    let limits = wgpu::Limits { max_storage_buffer_binding_size: 128 << 20, ..Default::default() };
+    let limits = wgpu::Limits { max_storage_buffer_binding_size: 128 << 20, ..defaults() };
     assert_eq!(firstshot::stages::image_estimate::band_rows(&limits, 7680), 1092, "128 MiB / (7680 x 16 bytes)");
 }
 
 #[test]
 fn test06_hemicube_and_bundle_resolutions_beyond_the_device() {
     let (patches, options) = cornell_box();
-    let limits = wgpu::Limits { max_texture_dimension_2d: 64, ..Default::default() };
+    let limits = wgpu::Limits { max_texture_dimension_2d: 64, ..defaults() };
     check_limits(&limits, &patches, &options).expect("64 fits a texture side of 64");
 
     let hemicube = RenderOptions { hemicube_resolution: 65, ..options.clone() };

@@ -29,15 +29,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let scale = exp2(f32(30 - e));
     var j_value = vec3<f32>(0.0);
     for (var c = 0u; c < 3u; c++) {
-        let lo = sums[6u * j + 2u * c];
-        let hi = sums[6u * j + 2u * c + 1u];
+        let lo = sums_at(6u * j + 2u * c);
+        let hi = sums_at(6u * j + 2u * c + 1u);
         // Two's complement: received radiance can be negative (see below).
         j_value[c] = (f32(bitcast<i32>(hi)) * 4294967296.0 + f32(lo)) / scale;
-        sums[6u * j + 2u * c] = 0u;
-        sums[6u * j + 2u * c + 1u] = 0u;
+        sums_set(6u * j + 2u * c, 0u);
+        sums_set(6u * j + 2u * c + 1u, 0u);
     }
-    let factor = bundle.direction.w / patches[j].v0.w;
-    let side = outgoing[j].w;
+    let factor = bundle.direction.w / patches_at(j).v0.w;
+    let side = outgoing_at(j).w;
     let incoming = j_value * factor;
     // The control variate: J_j carries the projected-area factor |n . d| of the one
     // direction (the radiance along it times the share of the patch it covers), whose mean
@@ -45,8 +45,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // mean for any Lbar_j drawn before d, and where the incoming radiance is close to
     // Lbar_j (the bulk of indirect light) nearly none of the factor's variance, which
     // otherwise multiplies from step to step (unbounded variance once albedo > 0.87).
-    let old = state[j];
-    let cos_d = abs(dot(patches[j].normal.xyz, bundle.direction.xyz));
+    let old = state_at(j);
+    let cos_d = abs(dot(patches_at(j).normal.xyz, bundle.direction.xyz));
     let diffuse = incoming - (cos_d - 0.5) * old.mean_radiance.rgb;
     let mean_radiance = mix(old.mean_radiance.rgb, 2.0 * diffuse, MEAN_RADIANCE_WEIGHT);
     // Past the burn-in, K joins the running sum whose mean the image's senders reflect.
@@ -54,10 +54,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (bundle.image_step != 0u) {
         sum += vec4<f32>(diffuse, 1.0);
     }
-    state[j] = PatchState(
+    state_set(j, PatchState(
         vec4<f32>(incoming, 0.0),
         vec4<f32>(-side * bundle.direction.xyz, 0.0),
         vec4<f32>(diffuse, 0.0),
         vec4<f32>(mean_radiance, 0.0),
-        sum);
+        sum));
 }

@@ -31,7 +31,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (j >= bundle.patch_count) {
         return;
     }
-    let p = patches[j];
+    let p = patches_at(j);
     let n = p.normal.xyz;
     let d = bundle.direction.xyz;
     let side = bundle_side(n, d);
@@ -48,7 +48,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // glossy reflection of this step's J (the one sample of win it has).
     var image_o = o;
     if (bundle.use_state != 0u) {
-        let s = state[j];
+        let s = state_at(j);
         let w_in = -s.direction.xyz;
         var glossy = vec3<f32>(0.0);
         if (dot(n, w_in) > 0.0 && dot(n, w_out) > 0.0) {
@@ -61,8 +61,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         }
         image_o += 2.0 * m.diffuse.rgb * mean + glossy;
     }
-    outgoing[j] = vec4<f32>(o, side);
-    image_outgoing[j] = vec4<f32>(image_o, side);
+    outgoing_set(j, vec4<f32>(o, side));
+    image_outgoing_set(j, vec4<f32>(image_o, side));
     let largest = abs(o);
     atomicMax(&max_bits, bitcast<u32>(max(largest.r, max(largest.g, largest.b))));
 }

@@ -38,11 +38,11 @@ fn before(a: vec2<u32>, b: vec2<u32>) -> bool {
 
 fn add_fixed(index: u32, value: i32) {
     let low = bitcast<u32>(value);
-    let old = atomicAdd(&sums[index], low);
+    let old = sums_add(index, low);
     // The high word gets the carry of the low one and the sign extension of the value.
     let high = select(0u, 1u, old > 0xffffffffu - low) + select(0u, 0xffffffffu, value < 0);
     if (high != 0u) {
-        atomicAdd(&sums[index + 1u], high);
+        sums_add(index + 1u, high);
     }
 }
 
@@ -83,7 +83,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             let other = fragments[u32(neighbour)].y;
             let other_front = (other & FRAGMENT_FRONT_BIT) != 0u;
             // Its front must face back toward this patch: the opposite facing.
-            received = select(vec3<f32>(0.0), outgoing[other & ~FRAGMENT_FRONT_BIT].rgb, other_front != front);
+            received = select(vec3<f32>(0.0), outgoing_at(other & ~FRAGMENT_FRONT_BIT).rgb, other_front != front);
         }
         for (var c = 0u; c < 3u; c++) {
             let value = i32(round(received[c] * scale));

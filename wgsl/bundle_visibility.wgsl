@@ -56,7 +56,7 @@ fn fs_fill(in: VertexOut) {
     if (slot < bundle.capacity) {
         // The facing travels with the fragment, so sorting and transfer need not look up
         // the patch.
-        let front = select(0u, FRAGMENT_FRONT_BIT, outgoing[in.patch_id].w > 0.0);
+        let front = select(0u, FRAGMENT_FRONT_BIT, outgoing_at(in.patch_id).w > 0.0);
         fragments[slot] = vec2<u32>(bitcast<u32>(in.depth), in.patch_id | front);
     } else {
         atomicMax(&overflow, 1u);

@@ -35,7 +35,7 @@ fn reduce_face(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let j = id - 1u;
-    let n = patches[j].normal;
+    let n = patches_at(j).normal;
     let s = samples[params.sample];
     var weight = 1.0;
     if (s.kind == LIGHT_DIRECTIONAL) {
@@ -84,10 +84,10 @@ fn append_sample(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
     atomicStore(&sums[2u * j], 0u);
     atomicStore(&sums[2u * j + 1u], 0u);
     let sum = f32(hi) * 4294967296.0 + f32(lo);
-    let r = sum * append.factor / patches[j].v0.w;
+    let r = sum * append.factor / patches_at(j).v0.w;
     row_counts[j] += 1u;
     let slot = atomicAdd(&pair_count, 1u);
     if (slot < append.capacity) {
-        pairs[slot] = vec4<u32>(j, append.sample, bitcast<u32>(r), 0u);
+        pairs_set(slot, vec4<u32>(j, append.sample, bitcast<u32>(r), 0u));
     }
 }

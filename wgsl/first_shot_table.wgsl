@@ -23,7 +23,7 @@ fn fill_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     if (k >= params.x) {
         return;
     }
-    let pair = pairs[k];
+    let pair = pairs_at(k);
     let slot = offsets[pair.x] + atomicAdd(&cursor[pair.x], 1u);
     entries[slot] = pair.yz;
 }
@@ -58,5 +58,5 @@ fn row_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wo
     for (var e = offsets[j]; e < offsets[j + 1u]; e++) {
         sum += samples[entries[e].x].strength.rgb * bitcast<f32>(entries[e].y);
     }
-    irradiance[j] = vec4<f32>(sum, 0.0);
+    irradiance_set(j, vec4<f32>(sum, 0.0));
 }

@@ -54,9 +54,9 @@ const SEGMENT_EPSILON: f32 = 1e-4;
 // Whether the segment y + t (x - y), SEGMENT_EPSILON < t < 1 - SEGMENT_EPSILON, crosses
 // patch k (Moller-Trumbore, either side).
 fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
-    let a = patches[k].v0.xyz;
-    let e1 = patches[k].v1.xyz - a;
-    let e2 = patches[k].v2.xyz - a;
+    let a = patches_at(k).v0.xyz;
+    let e1 = patches_at(k).v1.xyz - a;
+    let e2 = patches_at(k).v2.xyz - a;
     let dir = x - y;
     let p = cross(dir, e2);
     let det = dot(e1, p);
@@ -95,7 +95,7 @@ fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool) -> bool {
     // Most surfaces around the direction cannot cross the segment: those whose plane has y
     // and x on one side, and those whose plane holds x (x's neighbours in its own plane). One
     // load of the plane rules them out before the triangle test's three.
-    let plane = patches[id - 1u].normal;
+    let plane = patches_at(id - 1u).normal;
     let side_y = dot(plane.xyz, y) - plane.w;
     let side_x = dot(plane.xyz, x) - plane.w;
     if (side_y * side_x > 0.0 || abs(side_x) <= SEGMENT_EPSILON * length(x - y)) {
@@ -213,14 +213,14 @@ fn light_share(r2: f32, cos_l: f32, pick_area: f32) -> f32 {
 // unless m belongs to a first-shot emitting shape (whose emission the iteration leaves out)
 // and the image gathers.
 fn emitted_share(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
-    let pick_area = patches[m].light_pick_area;
-    let plane = patches[m].normal;
+    let pick_area = patches_at(m).light_pick_area;
+    let plane = patches_at(m).normal;
     let cos_l = -dot(plane.xyz, toward);
     if (params.mis == 0u || pick_area <= 0.0 || cos_l <= 0.0) {
         return vec3<f32>(0.0);
     }
     let t = abs((plane.w - dot(plane.xyz, x)) / cos_l);
-    return patches[m].emission.rgb * (1.0 - light_share(t * t, cos_l, pick_area));
+    return patches_at(m).emission.rgb * (1.0 - light_share(t * t, cos_l, pick_area));
 }
 
 // D(x, w_out): every light's direct radiance reflected at x on patch j toward w_out.
@@ -287,7 +287,7 @@ fn nearer(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, towar
         return best;
     }
     let m = fragments[k].y & ~FRAGMENT_FRONT_BIT;
-    let plane = patches[m].normal;
+    let plane = patches_at(m).normal;
     let denom = dot(plane.xyz, toward);
     // Distance from x to m's plane: ~0 for j's twin and the patches beside j in its plane,
     // which are not ahead of x whatever f32 rounding says.
@@ -312,14 +312,14 @@ fn nearer_hit(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, t
         return best;
     }
     let m = fragments[k].y & ~FRAGMENT_FRONT_BIT;
-    let plane = patches[m].normal;
+    let plane = patches_at(m).normal;
     let dist = plane.w - dot(plane.xyz, x);
     if (m == j || abs(dist) <= eps) {
         return best;
     }
-    let a = patches[m].v0.xyz;
-    let e1 = patches[m].v1.xyz - a;
-    let e2 = patches[m].v2.xyz - a;
+    let a = patches_at(m).v0.xyz;
+    let e1 = patches_at(m).v1.xyz - a;
+    let e2 = patches_at(m).v2.xyz - a;
     let p = cross(toward, e2);
     let det = dot(e1, p);
     if (abs(det) < 1e-30) {
@@ -390,7 +390,7 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
         let other = fragments[select(k - 1u, k + 1u, front)].y;
         if (((other & FRAGMENT_FRONT_BIT) != 0u) != front) {
             let m = other & ~FRAGMENT_FRONT_BIT;
-            return image_outgoing[m].rgb + emitted_share(m, x, toward);
+            return image_outgoing_at(m).rgb + emitted_share(m, x, toward);
         }
         return vec3<f32>(0.0);
     }
@@ -414,7 +414,7 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
     // A back face as the nearest hit says the ray entered a solid through a face the line
     // missed (x's ray and the line on two sides of its edge): that entry is not on the line,
     // so the rules below decide, as they do where the ray hits nothing the line holds.
-    if (hit.patch_id != NO_PATCH && dot(patches[hit.patch_id - 1u].normal.xyz, toward) < 0.0) {
+    if (hit.patch_id != NO_PATCH && dot(patches_at(hit.patch_id - 1u).normal.xyz, toward) < 0.0) {
         let m = hit.patch_id - 1u;
         return image_outgoing_at(m).rgb + emitted_share(m, x, toward);
     }
@@ -438,8 +438,8 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
     }
     let m = best.patch_id - 1u;
     // Its front must face x: against the direction of travel.
-    if (dot(patches[m].normal.xyz, toward) < 0.0) {
-        return image_outgoing[m].rgb + emitted_share(m, x, toward);
+    if (dot(patches_at(m).normal.xyz, toward) < 0.0) {
+        return image_outgoing_at(m).rgb + emitted_share(m, x, toward);
     }
     return vec3<f32>(0.0);
 }
@@ -467,7 +467,7 @@ fn seen(pixel: vec2<u32>) -> Seen {
     }
     let j = id - 1u;
     // Field by field: a CPU adapter loads every field of a whole-struct read.
-    let plane = patches[j].normal;
+    let plane = patches_at(j).normal;
     let n = plane.xyz;
     // The ray through this pass's sample point of the pixel.
     let dir = normalize(pixel_direction(camera, pixel));
@@ -496,8 +496,8 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
         radiance = vec3<f32>(0.0);
     }
     if (at.kind == SEEN_SURFACE) {
-        let m = materials[patches[at.j].material];
-        radiance = patches[at.j].emission.rgb + direct_light(at.j, at.x, at.n, m, at.w_out);
+        let m = materials[patches_at(at.j).material];
+        radiance = patches_at(at.j).emission.rgb + direct_light(at.j, at.x, at.n, m, at.w_out);
     }
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }
@@ -516,7 +516,7 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let at = seen(xy);
     var radiance = vec3<f32>(0.0);
     if (at.kind == SEEN_SURFACE) {
-        let m = materials[patches[at.j].material];
+        let m = materials[patches_at(at.j).material];
         let d = bundle.direction.xyz;
         let s = bundle_side(at.n, d);
         let toward = s * d;

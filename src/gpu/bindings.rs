@@ -22,30 +22,83 @@ pub enum BindKind {
 }
 
 /// One binding: the WGSL variable's name and its kind.
+///
+/// A paged storage binding (`pages` > 1) is an array split over that many buffers, none
+/// larger than one binding allows: page 0 is the variable `name` at this binding, pages 1 and
+/// on the variables `name_1`, `name_2`, ... at bindings after every entry of the group's list
+/// (`entries`); `gpu::kernel::source` declares them and the accessors that select the page
+/// (`name_at(i)`, `name_set(i, v)`, `name_add(i, v)` for atomics) from the length of page 0.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Binding {
     pub name: &'static str,
     pub kind: BindKind,
+    pub pages: u32,
+}
+
+impl Binding {
+    /// This storage binding split over `pages` buffers (see `Binding`).
+    pub const fn paged(self, pages: u32) -> Binding {
+        assert!(matches!(self.kind, BindKind::Storage { .. }) && pages >= 1);
+        Binding { pages, ..self }
+    }
+}
+
+/// One entry of a bind group's layout: `binding` number, variable name, kind, and the page
+/// (0 for an unpaged binding) of spec binding `index`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Entry {
+    pub binding: u32,
+    pub name: String,
+    pub kind: BindKind,
+    pub index: usize,
+    pub page: u32,
+}
+
+/// The layout entries of a group's `bindings`: binding i at i, then the pages after the first
+/// of each paged binding, in order.
+pub fn entries(bindings: &[Binding]) -> Vec<Entry> {
+    let mut out: Vec<Entry> = bindings
+        .iter()
+        .enumerate()
+        .map(|(i, b)| Entry { binding: i as u32, name: b.name.to_string(), kind: b.kind, index: i, page: 0 })
+        .collect();
+    for (i, b) in bindings.iter().enumerate() {
+        for page in 1..b.pages {
+            let binding = out.len() as u32;
+            out.push(Entry { binding, name: format!("{}_{page}", b.name), kind: b.kind, index: i, page });
+        }
+    }
+    out
+}
+
+/// Storage buffers a kernel binds (every page counted), which a device limits per stage.
+pub fn storage_buffers(spec: &KernelSpec) -> u32 {
+    spec.groups
+        .iter()
+        .flat_map(|g| g.iter())
+        .filter(|b| matches!(b.kind, BindKind::Storage { .. }))
+        .map(|b| b.pages)
+        .sum()
 }
 
 /// A uniform holding one `T`.
 pub const fn uniform<T>(name: &'static str) -> Binding {
-    Binding { name, kind: BindKind::Uniform { min_size: std::mem::size_of::<T>() as u64 } }
+    Binding { name, kind: BindKind::Uniform { min_size: std::mem::size_of::<T>() as u64 }, pages: 1 }
 }
 
 /// A read-only storage buffer of `T`s (or one `T`).
 pub const fn read<T>(name: &'static str) -> Binding {
-    Binding { name, kind: BindKind::Storage { read_only: true, min_size: std::mem::size_of::<T>() as u64 } }
+    Binding { name, kind: BindKind::Storage { read_only: true, min_size: std::mem::size_of::<T>() as u64 }, pages: 1 }
 }
 
 /// A writable storage buffer of `T`s (or one `T`).
 pub const fn read_write<T>(name: &'static str) -> Binding {
-    Binding { name, kind: BindKind::Storage { read_only: false, min_size: std::mem::size_of::<T>() as u64 } }
+    Binding { name, kind: BindKind::Storage { read_only: false, min_size: std::mem::size_of::<T>() as u64 }, pages: 1 }
 }
 
 /// A `texture_2d<u32>`.
 pub const fn uint_texture(name: &'static str) -> Binding {
-    Binding { name, kind: BindKind::UintTexture2d }
+    Binding { name, kind: BindKind::UintTexture2d, pages: 1 }
 }
 
 /// The shader stage of an entry point; compute ones carry their workgroup size.
@@ -100,11 +153,10 @@ pub fn group_layout(
     visibility: wgpu::ShaderStages,
     bindings: &[Binding],
 ) -> wgpu::BindGroupLayout {
-    let entries: Vec<wgpu::BindGroupLayoutEntry> = bindings
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupLayoutEntry {
-            binding: i as u32,
+    let entries: Vec<wgpu::BindGroupLayoutEntry> = entries(bindings)
+        .into_iter()
+        .map(|b| wgpu::BindGroupLayoutEntry {
+            binding: b.binding,
             visibility: binding_visibility(b.kind, visibility),
             ty: match b.kind {
                 BindKind::Uniform { min_size } => wgpu::BindingType::Buffer {
@@ -136,6 +188,9 @@ pub enum Resource<'a> {
     Buffer(&'a wgpu::Buffer),
     /// The first `size` bytes of the buffer.
     BufferPrefix(&'a wgpu::Buffer, NonZeroU64),
+    /// The pages of a paged binding, as many as it has at most (`Binding::pages`); a page
+    /// past the last is bound to the first (never read).
+    Pages(&'a [wgpu::Buffer]),
     Texture(&'a wgpu::TextureView),
 }
 
@@ -168,13 +223,25 @@ pub fn bind_group(
         bindings.len(),
         names()
     );
-    let entries: Vec<wgpu::BindGroupEntry> = bindings
-        .iter()
-        .zip(resources)
-        .enumerate()
-        .map(|(i, (b, (name, resource)))| {
+    let entries: Vec<wgpu::BindGroupEntry> = entries(bindings)
+        .into_iter()
+        .map(|e| {
+            let (i, b, (name, resource)) = (e.index, &bindings[e.index], &resources[e.index]);
             assert!(b.name == *name, "{label}: binding {i} is `{}` in the spec, `{name}` here", b.name);
             let resource = match (b.kind, *resource) {
+                (BindKind::Storage { .. }, Resource::Pages(pages)) => {
+                    assert!(
+                        !pages.is_empty() && pages.len() as u32 <= b.pages,
+                        "{label}: {} pages for `{name}`, which has {}",
+                        pages.len(),
+                        b.pages
+                    );
+                    pages.get(e.page as usize).unwrap_or(&pages[0]).as_entire_binding()
+                }
+                (_, Resource::Pages(_)) => panic!("{label}: binding {i} `{name}` is not a storage buffer"),
+                (BindKind::Storage { .. }, _) if b.pages > 1 => {
+                    panic!("{label}: binding {i} `{name}` is paged; give it Resource::Pages")
+                }
                 (BindKind::UintTexture2d, Resource::Texture(view)) => wgpu::BindingResource::TextureView(view),
                 (BindKind::Uniform { .. } | BindKind::Storage { .. }, Resource::Buffer(buffer)) => {
                     buffer.as_entire_binding()
@@ -184,7 +251,7 @@ pub fn bind_group(
                 }
                 (kind, _) => panic!("{label}: binding {i} `{name}` is {kind:?}, not what was given"),
             };
-            wgpu::BindGroupEntry { binding: i as u32, resource }
+            wgpu::BindGroupEntry { binding: e.binding, resource }
         })
         .collect();
     device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
@@ -340,6 +407,19 @@ impl Kernel {
     pub fn buffer_bind_group(&self, device: &wgpu::Device, group: usize, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
         self.spec.buffer_bind_group(device, group, &self.layouts[group], buffers)
     }
+
+    /// Bind group `group` of `resources` in binding order (whole buffers or pages).
+    pub fn resource_bind_group(&self, device: &wgpu::Device, group: usize, resources: &[Resource]) -> wgpu::BindGroup {
+        let bindings = self.spec.groups[group];
+        assert!(
+            bindings.len() == resources.len(),
+            "{}: {} resources for group {group}",
+            self.spec.stem,
+            resources.len()
+        );
+        let named: Vec<(&str, Resource)> = bindings.iter().zip(resources).map(|(b, r)| (b.name, *r)).collect();
+        self.bind_group(device, group, &named)
+    }
 }
 
 /// Workgroup counts for `blocks` workgroups (at least one), folded into 2D past the 65535
@@ -356,7 +436,8 @@ pub fn fold_2d(blocks: u32) -> (u32, u32) {
 pub fn check(spec: &KernelSpec, module: &naga::Module, info: &naga::valid::ModuleInfo) -> Vec<String> {
     let mut errors = Vec::new();
     let stem = spec.stem;
-    let declared = |group: u32, binding: u32| spec.groups.get(group as usize)?.get(binding as usize);
+    let groups: Vec<Vec<Entry>> = spec.groups.iter().map(|g| entries(g)).collect();
+    let declared = |group: u32, binding: u32| groups.get(group as usize)?.get(binding as usize);
     for (_, var) in module.global_variables.iter() {
         let Some(rb) = &var.binding else { continue };
         let name = var.name.as_deref().unwrap_or("?");
@@ -372,7 +453,7 @@ pub fn check(spec: &KernelSpec, module: &naga::Module, info: &naga::valid::Modul
             errors.push(format!("{at}: {e}"));
         }
     }
-    for (g, group) in spec.groups.iter().enumerate() {
+    for (g, group) in groups.iter().enumerate() {
         for (i, b) in group.iter().enumerate() {
             let found = module
                 .global_variables
@@ -456,7 +537,11 @@ fn check_entry_points(
         let uses = info.get_entry_point(index);
         for (handle, var) in module.global_variables.iter() {
             let Some(rb) = &var.binding else { continue };
-            let Some(b) = spec.groups.get(rb.group as usize).and_then(|g| g.get(rb.binding as usize)) else { continue };
+            let Some(b) =
+                spec.groups.get(rb.group as usize).and_then(|g| entries(g).into_iter().nth(rb.binding as usize))
+            else {
+                continue;
+            };
             if !uses[handle].is_empty() && !binding_visibility(b.kind, spec.visibility).contains(stage) {
                 errors.push(format!(
                     "{stem}: {wgsl_stage:?} entry point `{}` uses `{}`, which the spec's visibility hides from it",
@@ -518,8 +603,12 @@ mod tests {
 
     #[test]
     fn missing_and_extra_bindings_are_reported() {
-        assert_reported(&errors_of(|_, g, _| _ = g.pop()), "`state` is in the WGSL but not in the spec");
-        assert_reported(&errors_of(|_, g, _| g.push(read::<u32>("extra"))), "binding 6 `extra`, the WGSL does not");
+        // The pages of paged bindings follow the whole list: without `state`, its last page
+        // (binding 21 of the WGSL) is beyond the spec; with one more binding, the spec's
+        // last page moves past the WGSL's.
+        assert_reported(&errors_of(|_, g, _| _ = g.pop()), "`state_7` is in the WGSL but not in the spec");
+        assert_reported(&errors_of(|_, g, _| g.push(read::<u32>("extra"))), "binding 22 `state_7`, the WGSL does not");
+        assert_reported(&errors_of(|_, g, _| g[5] = g[5].paged(2)), "`state_2` is in the WGSL but not in the spec");
     }
 
     #[test]

@@ -53,6 +53,68 @@ pub fn source(stem: &str) -> String {
     }
     out.push_str(&format!("\n// ---- {stem}.wgsl\n"));
     out.push_str(body);
+    if let Some(spec) = crate::stages::SPECS.iter().find(|s| s.stem == stem) {
+        let pages = paged_arrays(spec, &out);
+        if !pages.is_empty() {
+            out.push_str("\n// ---- generated: the pages of the paged arrays (gpu::bindings::Binding)\n");
+            out.push_str(&pages);
+        }
+    }
+    out
+}
+
+/// The declarations of pages 1.. of every paged binding of `spec` and the accessors that pick
+/// the page: element `i` lies in page `i / len` at `i % len`, `len` being the length of page
+/// 0 (every page but the last is full). The element type and access are read from page 0's
+/// declaration in `src`, which must be `var<storage, ACCESS> NAME: array<TYPE>;`.
+fn paged_arrays(spec: &crate::gpu::bindings::KernelSpec, src: &str) -> String {
+    use crate::gpu::bindings::entries;
+    let mut out = String::new();
+    for (g, group) in spec.groups.iter().enumerate() {
+        let all = entries(group);
+        for b in group.iter().filter(|b| b.pages > 1) {
+            let name = b.name;
+            let decl = format!("> {name}: array<");
+            let line = src.lines().find(|l| l.contains("var<storage") && l.contains(&decl)).unwrap_or_else(|| {
+                panic!("{}: no `var<storage, ...> {name}: array<...>;` for the paged binding", spec.stem)
+            });
+            let access = &line[line.find("var<").unwrap() + 4..line.find(&decl).unwrap()];
+            let start = line.find(&decl).unwrap() + decl.len();
+            let ty = &line[start..line[start..].rfind(">;").map(|e| start + e).expect("array<TYPE>;")];
+            let last = b.pages - 1;
+            for e in all.iter().filter(|e| e.page > 0 && e.name.starts_with(name) && group[e.index].name == name) {
+                out.push_str(&format!("@group({g}) @binding({}) var<{access}> {}: array<{ty}>;\n", e.binding, e.name));
+            }
+            let page = |k: u32| if k == 0 { name.to_string() } else { format!("{name}_{k}") };
+            let switch = |body: &dyn Fn(&str) -> String| {
+                let mut s = String::from("    switch (i / n) {\n");
+                for k in 1..last {
+                    s.push_str(&format!("        case {k}u: {{ {} }}\n", body(&page(k))));
+                }
+                s.push_str(&format!("        default: {{ {} }}\n    }}\n", body(&page(last))));
+                s
+            };
+            let head = format!("    let n = arrayLength(&{name});\n");
+            if ty.starts_with("atomic<") {
+                let scalar = &ty[7..ty.len() - 1];
+                out.push_str(&format!(
+                    "fn {name}_add(i: u32, v: {scalar}) -> {scalar} {{\n{head}    if (i < n) {{ return atomicAdd(&{name}[i], v); }}\n    let k = i % n;\n{}    return {scalar}();\n}}\n",
+                    switch(&|p| format!("return atomicAdd(&{p}[k], v);"))
+                ));
+                continue;
+            }
+            out.push_str(&format!(
+                "fn {name}_at(i: u32) -> {ty} {{\n{head}    if (i < n) {{ return {name}[i]; }}\n    let k = i % n;\n{}    return {ty}();\n}}\n",
+                switch(&|p| format!("return {p}[k];"))
+            ));
+            if access.contains("read_write") {
+                out.push_str(&format!(
+                    "fn {name}_set(i: u32, v: {ty}) {{\n{head}    if (i < n) {{ {name}[i] = v; return; }}\n    let k = i % n;\n{}}}\n",
+                    switch(&|p| format!("{p}[k] = v;"))
+                ));
+            }
+        }
+    }
     out
 }
 

@@ -7,17 +7,175 @@ use crate::layout::*;
 use crate::scene::{MaterialKind, PatchKind, Patches, SampleKind, Scene};
 use glam::DVec3;
 
+/// A per-patch array that may be larger than one storage binding: split over at most
+/// `pages` buffers of `page_bytes / bytes` whole patches each (`Paged`), bound as one paged
+/// binding (`gpu::bindings::Binding::paged`) that the WGSL reads through `<name>_at(i)`.
+/// `pages` is fixed per array: every page is a storage binding of every kernel that reads the
+/// array, within the device's storage buffers per shader stage (32 on lavapipe).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PerPatch {
+    pub what: &'static str,
+    /// Bytes per patch.
+    pub bytes: u64,
+    pub pages: u32,
+}
+
+impl PerPatch {
+    /// Whole patches in one page of at most `page_bytes`.
+    pub fn patches_per_page(&self, page_bytes: u64) -> u64 {
+        page_bytes / self.bytes
+    }
+    /// The most patches the array holds with pages of at most `page_bytes`.
+    pub fn capacity(&self, page_bytes: u64) -> u64 {
+        self.pages as u64 * self.patches_per_page(page_bytes)
+    }
+}
+
+/// The patch table (`GpuPatch`), read at random by patch id (image estimate, first shot).
+pub const PATCH_TABLE: PerPatch = PerPatch { what: "the patch table", bytes: size_of::<GpuPatch>() as u64, pages: 8 };
+/// The iteration state (`GpuPatchState`).
+pub const PATCH_STATE: PerPatch =
+    PerPatch { what: "the iteration state", bytes: size_of::<GpuPatchState>() as u64, pages: 8 };
+/// O_j and what the image gathers (vec4 each), read at random by the transfer and the image.
+pub const OUTGOING: PerPatch = PerPatch { what: "the outgoing radiance", bytes: 16, pages: 2 };
+/// The transfer's signed 64-bit fixed-point sums (3 x 2 u32), added to at random.
+pub const TRANSFER_SUMS: PerPatch = PerPatch { what: "the transfer sums", bytes: 24, pages: 2 };
+/// The first shot's irradiance per patch (vec4).
+pub const FIRST_SHOT_IRRADIANCE: PerPatch = PerPatch { what: "the first-shot irradiance", bytes: 16, pages: 2 };
+/// The first shot's list of (patch, sample, r_ij) pairs (vec4<u32> a pair; "patches" are
+/// pairs here), appended to at random: bounded by the lights' windows, not the patches, but
+/// 45 faces of 512 x 512 can see more pairs than one 128 MiB binding holds (8.4 M). Not in
+/// `PAGED_ARRAYS`: its length is known only once the first shot ran (`first_shot::run`).
+/// 8 pages, so that a page as small as the patch table's holds a scene's pairs (4 to 5 a
+/// patch in the Cornell box); the table's entries (8 bytes a pair, one binding) then bound
+/// the pairs (`memory::max_pairs`: 16.7 M on lavapipe).
+pub const FIRST_SHOT_PAIRS: PerPatch = PerPatch { what: "the first-shot pair list", bytes: 16, pages: 8 };
+/// Every paged per-patch array.
+pub const PAGED_ARRAYS: &[PerPatch] = &[PATCH_TABLE, PATCH_STATE, OUTGOING, TRANSFER_SUMS, FIRST_SHOT_IRRADIANCE];
+
+/// The largest page of a paged array for a device: its largest storage binding (and buffer),
+/// or `limit` if smaller (`RenderOptions::page_bytes`, a test knob that emulates a smaller
+/// device). Each page is a buffer of its own, bound whole: no offset alignment applies.
+pub fn page_bytes(limits: &wgpu::Limits, limit: Option<u64>) -> u64 {
+    let device = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    limit.unwrap_or(u64::MAX).min(device)
+}
+
+/// The buffers of one paged per-patch array (`PerPatch`), in order; all but the last full.
+pub struct Paged {
+    pub pages: Vec<wgpu::Buffer>,
+    /// Bytes of the whole array.
+    pub bytes: u64,
+}
+
+impl Paged {
+    fn split(array: PerPatch, n: u64, page_bytes: u64) -> Vec<std::ops::Range<u64>> {
+        let per_page = array.patches_per_page(page_bytes).max(1);
+        let count = n.div_ceil(per_page).max(1);
+        assert!(
+            count <= array.pages as u64,
+            "{}: {n} patches need {count} pages of {per_page}, more than its {} (render::check_limits refuses that)",
+            array.what,
+            array.pages
+        );
+        (0..count).map(|k| k * per_page..((k + 1) * per_page).min(n).max(k * per_page + 1)).collect()
+    }
+
+    /// `n` patches of zeros.
+    pub fn zeroed(
+        device: &wgpu::Device,
+        label: &str,
+        array: PerPatch,
+        n: u64,
+        page_bytes: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Paged {
+        let pages = Self::split(array, n, page_bytes)
+            .into_iter()
+            .enumerate()
+            .map(|(k, r)| {
+                buffers::storage_zeroed(device, &format!("{label}.page{k}"), (r.end - r.start) * array.bytes, extra)
+            })
+            .collect();
+        Paged { pages, bytes: n.max(1) * array.bytes }
+    }
+
+    /// `data`, one element per patch.
+    pub fn init<T: bytemuck::Pod>(
+        device: &wgpu::Device,
+        label: &str,
+        array: PerPatch,
+        data: &[T],
+        page_bytes: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Paged {
+        assert_eq!(size_of::<T>() as u64, array.bytes, "{}: one element per patch", array.what);
+        let pages = Self::split(array, data.len() as u64, page_bytes)
+            .into_iter()
+            .enumerate()
+            .map(|(k, r)| {
+                let end = (r.end as usize).min(data.len());
+                buffers::storage_init(device, &format!("{label}.page{k}"), &data[r.start as usize..end], extra)
+            })
+            .collect();
+        Paged { pages, bytes: std::mem::size_of_val(data) as u64 }
+    }
+
+    /// The binding resource of all pages.
+    pub fn resource(&self) -> bindings::Resource<'_> {
+        bindings::Resource::Pages(&self.pages)
+    }
+
+    /// Bytes of the whole array.
+    pub fn size(&self) -> u64 {
+        self.bytes
+    }
+
+    /// Records copies of the whole array into `to` (at least `size()` bytes), page by page.
+    pub fn copy_to(&self, encoder: &mut wgpu::CommandEncoder, to: &wgpu::Buffer) {
+        let mut at = 0;
+        for page in &self.pages {
+            let n = page.size().min(self.bytes - at);
+            encoder.copy_buffer_to_buffer(page, 0, to, at, n);
+            at += n;
+        }
+    }
+
+    /// Records copies of the whole array from `from` (as laid out by `copy_to`).
+    pub fn copy_from(&self, encoder: &mut wgpu::CommandEncoder, from: &wgpu::Buffer) {
+        let mut at = 0;
+        for page in &self.pages {
+            let n = page.size().min(self.bytes - at);
+            encoder.copy_buffer_to_buffer(from, at, page, 0, n);
+            at += n;
+        }
+    }
+
+    /// Writes the whole array (`size()` bytes) through `queue`, page by page.
+    pub fn write(&self, queue: &wgpu::Queue, bytes: &[u8]) {
+        assert_eq!(bytes.len() as u64, self.bytes);
+        let mut at = 0usize;
+        for page in &self.pages {
+            let n = (page.size() as usize).min(bytes.len() - at);
+            queue.write_buffer(page, 0, &bytes[at..at + n]);
+            at += n;
+        }
+    }
+}
+
 /// GPU copies of the tessellated scene.
 pub struct SceneBuffers {
     pub patch_count: u32,
-    pub patches: wgpu::Buffer,
+    /// The largest page of the paged per-patch arrays (`page_bytes`).
+    pub page_bytes: u64,
+    pub patches: Paged,
     pub materials: wgpu::Buffer,
     pub samples: wgpu::Buffer,
     pub sample_count: u32,
     /// Three `RasterVertex` per patch, in patch order.
     pub vertices: wgpu::Buffer,
     /// `GpuPatchState` per patch (J_j, win_j).
-    pub state: wgpu::Buffer,
+    pub state: Paged,
     /// The first-shot factors r_ij, sparse by patch (empty until the first shot ran).
     pub first_shot: FirstShotTable,
     /// Bounding sphere of all geometry and light samples.
@@ -153,13 +311,25 @@ pub fn bounding_sphere(patches: &Patches) -> (DVec3, f64) {
 
 impl SceneBuffers {
     pub fn new(device: &wgpu::Device, scene: &Scene, patches: &Patches, first_shot: bool) -> SceneBuffers {
+        Self::with_pages(device, scene, patches, first_shot, page_bytes(&device.limits(), None))
+    }
+
+    /// As `new`, the per-patch arrays in pages of at most `page_bytes` (`page_bytes`).
+    pub fn with_pages(
+        device: &wgpu::Device,
+        scene: &Scene,
+        patches: &Patches,
+        first_shot: bool,
+        page_bytes: u64,
+    ) -> SceneBuffers {
         let gpu = gpu_patches(scene, patches, first_shot);
         let samples = gpu_samples(patches);
         let (centre, radius) = bounding_sphere(patches);
         let none = wgpu::BufferUsages::empty();
         SceneBuffers {
             patch_count: gpu.len() as u32,
-            patches: buffers::storage_init(device, "firstshot.scene.patches", &gpu, none),
+            page_bytes,
+            patches: Paged::init(device, "firstshot.scene.patches", PATCH_TABLE, &gpu, page_bytes, none),
             materials: buffers::storage_init(device, "firstshot.scene.materials", &gpu_materials(scene), none),
             samples: buffers::storage_init(device, "firstshot.scene.light_samples", &samples, none),
             sample_count: samples.len() as u32,
@@ -169,13 +339,15 @@ impl SceneBuffers {
                 &raster_vertices(patches),
                 wgpu::BufferUsages::VERTEX,
             ),
-            state: buffers::storage_zeroed(
+            state: Paged::zeroed(
                 device,
                 "firstshot.scene.patch_state",
-                (gpu.len() * std::mem::size_of::<GpuPatchState>()) as u64,
-                wgpu::BufferUsages::COPY_SRC,
+                PATCH_STATE,
+                gpu.len() as u64,
+                page_bytes,
+                wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
             ),
-            first_shot: FirstShotTable::empty(device, gpu.len() as u32),
+            first_shot: FirstShotTable::empty(device, gpu.len() as u32, page_bytes),
             centre,
             radius,
         }
@@ -193,7 +365,7 @@ pub struct FirstShotTable {
     /// vec2<u32> per stored pair.
     pub entries: wgpu::Buffer,
     /// vec4<f32> per patch: rgb sum_i S_i r_ij (all a diffuse patch needs).
-    pub irradiance: wgpu::Buffer,
+    pub irradiance: Paged,
     pub entry_count: u32,
 }
 
@@ -206,7 +378,7 @@ pub const FIRST_SHOT_TABLE_GROUP: &[Binding] = &[
     read::<[u32; 2]>("fs_entries"),
     read::<GpuLightSample>("samples"),
     // rgb sum_i S_i r_ij per patch.
-    read::<[f32; 4]>("fs_irradiance"),
+    read::<[f32; 4]>("fs_irradiance").paged(FIRST_SHOT_IRRADIANCE.pages),
 ];
 
 impl FirstShotTable {
@@ -227,13 +399,13 @@ impl FirstShotTable {
                 ("fs_offsets", (&self.offsets).into()),
                 ("fs_entries", (&self.entries).into()),
                 ("samples", samples.into()),
-                ("fs_irradiance", (&self.irradiance).into()),
+                ("fs_irradiance", self.irradiance.resource()),
             ],
         )
     }
 
     /// No light pairs: every patch's row is empty.
-    pub fn empty(device: &wgpu::Device, patch_count: u32) -> Self {
+    pub fn empty(device: &wgpu::Device, patch_count: u32, page_bytes: u64) -> Self {
         FirstShotTable {
             offsets: buffers::storage_zeroed(
                 device,
@@ -242,10 +414,12 @@ impl FirstShotTable {
                 wgpu::BufferUsages::COPY_SRC,
             ),
             entries: buffers::storage_zeroed(device, "firstshot.first_shot.entries", 16, wgpu::BufferUsages::COPY_SRC),
-            irradiance: buffers::storage_zeroed(
+            irradiance: Paged::zeroed(
                 device,
                 "firstshot.first_shot.irradiance",
-                16 * patch_count as u64,
+                FIRST_SHOT_IRRADIANCE,
+                patch_count as u64,
+                page_bytes,
                 wgpu::BufferUsages::COPY_SRC,
             ),
             entry_count: 0,

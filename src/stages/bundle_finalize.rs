@@ -1,7 +1,8 @@
 //! Bundle finalize (`wgsl/bundle_finalize.wgsl`): the fixed-point sums into J_j and win_j.
 
-use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
+use crate::gpu::bindings::{KernelSpec, Resource, compute, read, read_write, uniform};
 use crate::gpu::kernel;
+use crate::gpu::scene_buffers::{OUTGOING, PATCH_STATE, PATCH_TABLE, TRANSFER_SUMS};
 use crate::layout::{GpuBundle, GpuPatch, GpuPatchState};
 
 pub const SPEC: KernelSpec = KernelSpec {
@@ -11,14 +12,14 @@ pub const SPEC: KernelSpec = KernelSpec {
     entry_points: &[compute("main", [64, 1, 1])],
     groups: &[&[
         uniform::<GpuBundle>("bundle"),
-        read::<GpuPatch>("patches"),
+        read::<GpuPatch>("patches").paged(PATCH_TABLE.pages),
         // 6 per patch (lo, hi per channel), cleared for the next step; one invocation per patch.
-        read_write::<u32>("sums"),
+        read_write::<u32>("sums").paged(TRANSFER_SUMS.pages),
         read::<u32>("max_bits"),
         // w: s_j.
-        read::<[f32; 4]>("outgoing"),
+        read::<[f32; 4]>("outgoing").paged(OUTGOING.pages),
         // One writer per patch.
-        read_write::<GpuPatchState>("state"),
+        read_write::<GpuPatchState>("state").paged(PATCH_STATE.pages),
     ]],
 };
 
@@ -30,11 +31,11 @@ pub struct BundleFinalize {
 
 impl BundleFinalize {
     /// `buffers`: bundle, patches, sums, max_bits, outgoing, state (`SPEC`'s group 0).
-    pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 6], patch_count: u32) -> Self {
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 6], patch_count: u32) -> Self {
         let built = SPEC.build(device);
         BundleFinalize {
             pipeline: built.compute_pipeline(device, "main"),
-            bind_group: built.buffer_bind_group(device, 0, &buffers),
+            bind_group: built.resource_bind_group(device, 0, &buffers),
             patch_count,
         }
     }

@@ -3,7 +3,7 @@
 
 use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
 use crate::gpu::kernel;
-use crate::gpu::scene_buffers::{FIRST_SHOT_TABLE_GROUP, SceneBuffers};
+use crate::gpu::scene_buffers::{FIRST_SHOT_TABLE_GROUP, OUTGOING, PATCH_STATE, PATCH_TABLE, Paged, SceneBuffers};
 use crate::layout::{GpuBundle, GpuMaterial, GpuPatch, GpuPatchState};
 
 pub const SPEC: KernelSpec = KernelSpec {
@@ -14,17 +14,17 @@ pub const SPEC: KernelSpec = KernelSpec {
     groups: &[
         &[
             uniform::<GpuBundle>("bundle"),
-            read::<GpuPatch>("patches"),
+            read::<GpuPatch>("patches").paged(PATCH_TABLE.pages),
             read::<GpuMaterial>("materials"),
             // J_j, win_j of the previous step.
-            read::<GpuPatchState>("state"),
+            read::<GpuPatchState>("state").paged(PATCH_STATE.pages),
             // rgb O_j, w s_j; one writer per patch.
-            read_write::<[f32; 4]>("outgoing"),
+            read_write::<[f32; 4]>("outgoing").paged(OUTGOING.pages),
             // Bits of the largest O channel (positive floats order like their bits).
             read_write::<u32>("max_bits"),
             // rgb what the image gathers from j (its diffuse reflection of the mean J of the
             // image steps so far), w s_j; one writer per patch.
-            read_write::<[f32; 4]>("image_outgoing"),
+            read_write::<[f32; 4]>("image_outgoing").paged(OUTGOING.pages),
         ],
         FIRST_SHOT_TABLE_GROUP,
     ],
@@ -42,9 +42,9 @@ impl BundleReflect {
         device: &wgpu::Device,
         scene: &SceneBuffers,
         bundle: &wgpu::Buffer,
-        outgoing: &wgpu::Buffer,
+        outgoing: &Paged,
         max_bits: &wgpu::Buffer,
-        image_outgoing: &wgpu::Buffer,
+        image_outgoing: &Paged,
     ) -> Self {
         let built = SPEC.build(device);
         BundleReflect {
@@ -54,12 +54,12 @@ impl BundleReflect {
                 0,
                 &[
                     ("bundle", bundle.into()),
-                    ("patches", (&scene.patches).into()),
+                    ("patches", scene.patches.resource()),
                     ("materials", (&scene.materials).into()),
-                    ("state", (&scene.state).into()),
-                    ("outgoing", outgoing.into()),
+                    ("state", scene.state.resource()),
+                    ("outgoing", outgoing.resource()),
                     ("max_bits", max_bits.into()),
-                    ("image_outgoing", image_outgoing.into()),
+                    ("image_outgoing", image_outgoing.resource()),
                 ],
             ),
             table_group: scene.first_shot.bind_group(device, &built.layouts[1], &scene.samples),

@@ -1,8 +1,9 @@
 //! Bundle transfer (`wgsl/bundle_transfer.wgsl`): sorts every line's surfaces and adds the
 //! radiance each patch receives to its fixed-point sums.
 
-use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
+use crate::gpu::bindings::{KernelSpec, Resource, compute, read, read_write, uniform};
 use crate::gpu::kernel;
+use crate::gpu::scene_buffers::{OUTGOING, TRANSFER_SUMS};
 use crate::layout::GpuBundle;
 
 pub const SPEC: KernelSpec = KernelSpec {
@@ -18,9 +19,9 @@ pub const SPEC: KernelSpec = KernelSpec {
         // invocation.
         read_write::<[u32; 2]>("fragments"),
         // O_j from bundle_reflect.
-        read::<[f32; 4]>("outgoing"),
+        read::<[f32; 4]>("outgoing").paged(OUTGOING.pages),
         // 6 per patch: lo, hi per channel.
-        read_write::<u32>("sums"),
+        read_write::<u32>("sums").paged(TRANSFER_SUMS.pages),
         // Largest radiance of the step.
         read::<u32>("max_bits"),
     ]],
@@ -34,11 +35,11 @@ pub struct BundleTransfer {
 
 impl BundleTransfer {
     /// `buffers`: bundle, offsets, fragments, outgoing, sums, max_bits (`SPEC`'s group 0).
-    pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 6], lines: u32) -> Self {
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 6], lines: u32) -> Self {
         let built = SPEC.build(device);
         BundleTransfer {
             pipeline: built.compute_pipeline(device, "main"),
-            bind_group: built.buffer_bind_group(device, 0, &buffers),
+            bind_group: built.resource_bind_group(device, 0, &buffers),
             lines,
         }
     }

@@ -1,7 +1,8 @@
 //! Bundle visibility (`wgsl/bundle_visibility.wgsl`): every surface on every line of the
 //! bundle's grid, by a counting pass, a prefix sum and a filling pass.
 
-use crate::gpu::bindings::{KernelSpec, fragment, read, read_write, uniform, vertex};
+use crate::gpu::bindings::{KernelSpec, Resource, fragment, read, read_write, uniform, vertex};
+use crate::gpu::scene_buffers::OUTGOING;
 use crate::layout::GpuBundle;
 use crate::stages::camera_item_buffer::raster_vertex_layout;
 
@@ -24,7 +25,7 @@ pub const SPEC: KernelSpec = KernelSpec {
         // Set when a slot lies past the capacity: the host grows the list and redoes the steps.
         read_write::<u32>("overflow"),
         // w: s_j from bundle_reflect; fs_fill.
-        read::<[f32; 4]>("outgoing"),
+        read::<[f32; 4]>("outgoing").paged(OUTGOING.pages),
     ]],
 };
 
@@ -38,7 +39,7 @@ pub struct BundleVisibility {
 impl BundleVisibility {
     /// `buffers`: bundle, counts, offsets, cursor, fragments, overflow, outgoing (`SPEC`'s
     /// group 0).
-    pub fn new(device: &wgpu::Device, buffers: [&wgpu::Buffer; 7], resolution: u32) -> Self {
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 7], resolution: u32) -> Self {
         let built = SPEC.build(device);
         let pipeline = |entry: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -83,7 +84,7 @@ impl BundleVisibility {
         BundleVisibility {
             count: pipeline("fs_count"),
             fill: pipeline("fs_fill"),
-            bind_group: built.buffer_bind_group(device, 0, &buffers),
+            bind_group: built.resource_bind_group(device, 0, &buffers),
             depth_view: depth.create_view(&Default::default()),
         }
     }

@@ -22,7 +22,7 @@ pub const SPEC: KernelSpec = KernelSpec {
         uniform::<GpuFaceParams>("params"),
         // reduce_face: the face's item buffer.
         uint_texture("item_buffer"),
-        read::<GpuPatch>("patches"),
+        read::<GpuPatch>("patches").paged(crate::gpu::scene_buffers::PATCH_TABLE.pages),
         read::<GpuLightSample>("samples"),
         // lo, hi per patch.
         read_write::<[u32; 2]>("sums"),
@@ -31,7 +31,7 @@ pub const SPEC: KernelSpec = KernelSpec {
         // Pairs per patch; one writer per patch.
         read_write::<u32>("row_counts"),
         // (patch, sample, bits of r_ij, 0).
-        read_write::<[u32; 4]>("pairs"),
+        read_write::<[u32; 4]>("pairs").paged(crate::gpu::scene_buffers::FIRST_SHOT_PAIRS.pages),
         // May exceed the capacity: then the host grows the list and runs the first shot again.
         read_write::<u32>("pair_count"),
     ]],
@@ -49,7 +49,8 @@ pub struct FirstShotReduce {
     /// Pairs per patch, patch_count + 1 u32 (the last stays 0, so that an exclusive prefix
     /// sum over all of them ends with the total).
     pub row_counts: wgpu::Buffer,
-    pub pairs: wgpu::Buffer,
+    /// `scene_buffers::FIRST_SHOT_PAIRS`, `capacity` of them.
+    pub pairs: crate::gpu::scene_buffers::Paged,
     pub pair_count: wgpu::Buffer,
     pub capacity: u32,
     face_size: [u32; 2],
@@ -73,8 +74,14 @@ impl FirstShotReduce {
         );
         let sums = buffers::storage_zeroed(device, "firstshot.first_shot_reduce.sums", 8 * n, none);
         let row_counts = buffers::storage_zeroed(device, "firstshot.first_shot_reduce.row_counts", 4 * (n + 1), none);
-        let pairs =
-            buffers::storage_zeroed(device, "firstshot.first_shot_reduce.pairs", 16 * capacity.max(1) as u64, none);
+        let pairs = crate::gpu::scene_buffers::Paged::zeroed(
+            device,
+            "firstshot.first_shot_reduce.pairs",
+            crate::gpu::scene_buffers::FIRST_SHOT_PAIRS,
+            capacity.max(1) as u64,
+            scene.page_bytes,
+            none,
+        );
         let pair_count =
             buffers::storage_zeroed(device, "firstshot.first_shot_reduce.pair_count", 4, wgpu::BufferUsages::COPY_SRC);
         let bind_group = built.bind_group(
@@ -84,12 +91,12 @@ impl FirstShotReduce {
                 ("face", (&faces.camera).into()),
                 ("params", (&face_params).into()),
                 ("item_buffer", (&faces.ids_view).into()),
-                ("patches", (&scene.patches).into()),
+                ("patches", scene.patches.resource()),
                 ("samples", (&scene.samples).into()),
                 ("sums", (&sums).into()),
                 ("append", (&append_params).into()),
                 ("row_counts", (&row_counts).into()),
-                ("pairs", (&pairs).into()),
+                ("pairs", pairs.resource()),
                 ("pair_count", (&pair_count).into()),
             ],
         );

@@ -2,7 +2,7 @@
 //! row in ascending sample order, and each row's irradiance sum for diffuse patches.
 
 use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
-use crate::gpu::scene_buffers::FirstShotTable;
+use crate::gpu::scene_buffers::{FIRST_SHOT_IRRADIANCE, FirstShotTable, SceneBuffers};
 use crate::gpu::{buffers, kernel};
 use crate::layout::GpuLightSample;
 use crate::stages::prefix_sum::PrefixSum;
@@ -20,7 +20,7 @@ pub const SPEC: KernelSpec = KernelSpec {
     groups: &[&[
         // x: pairs, y: patches.
         uniform::<[u32; 4]>("params"),
-        read::<[u32; 4]>("pairs"),
+        read::<[u32; 4]>("pairs").paged(crate::gpu::scene_buffers::FIRST_SHOT_PAIRS.pages),
         // patches + 1 row starts.
         read::<u32>("offsets"),
         // Zeroed before fill_rows.
@@ -29,27 +29,35 @@ pub const SPEC: KernelSpec = KernelSpec {
         read_write::<[u32; 2]>("entries"),
         read::<GpuLightSample>("samples"),
         // rgb sum_i S_i r_ij per patch.
-        read_write::<[f32; 4]>("irradiance"),
+        read_write::<[f32; 4]>("irradiance").paged(FIRST_SHOT_IRRADIANCE.pages),
     ]],
 };
 
 /// Records the build of the table from `pair_total` pairs, the row counts (patch_count + 1
 /// u32, the last 0) and the light samples, and returns it with the temporaries the
 /// recorded commands still use (keep them until the commands are submitted).
+/// `scene` gives the patch count, the light samples and the page size of the irradiance.
 pub fn build(
     device: &wgpu::Device,
     encoder: &mut wgpu::CommandEncoder,
-    patch_count: u32,
-    pairs: &wgpu::Buffer,
+    scene: &SceneBuffers,
+    pairs: &crate::gpu::scene_buffers::Paged,
     pair_total: u32,
     row_counts: &wgpu::Buffer,
-    samples: &wgpu::Buffer,
 ) -> (FirstShotTable, Vec<wgpu::Buffer>, PrefixSum) {
+    let (patch_count, samples, page_bytes) = (scene.patch_count, &scene.samples, scene.page_bytes);
     let n = patch_count as u64;
     let usage = wgpu::BufferUsages::COPY_SRC;
     let offsets = buffers::storage_zeroed(device, "firstshot.first_shot.offsets", 4 * (n + 1), usage);
     let entries = buffers::storage_zeroed(device, "firstshot.first_shot.entries", 8 * pair_total.max(1) as u64, usage);
-    let irradiance = buffers::storage_zeroed(device, "firstshot.first_shot.irradiance", 16 * n, usage);
+    let irradiance = crate::gpu::scene_buffers::Paged::zeroed(
+        device,
+        "firstshot.first_shot.irradiance",
+        FIRST_SHOT_IRRADIANCE,
+        n,
+        page_bytes,
+        usage,
+    );
     let cursor =
         buffers::storage_zeroed(device, "firstshot.first_shot_table.cursor", 4 * n, wgpu::BufferUsages::empty());
     let params = buffers::uniform(device, "firstshot.first_shot_table.params", &[pair_total, patch_count, 0, 0]);
@@ -62,12 +70,12 @@ pub fn build(
         0,
         &[
             ("params", (&params).into()),
-            ("pairs", pairs.into()),
+            ("pairs", pairs.resource()),
             ("offsets", (&offsets).into()),
             ("cursor", (&cursor).into()),
             ("entries", (&entries).into()),
             ("samples", samples.into()),
-            ("irradiance", (&irradiance).into()),
+            ("irradiance", irradiance.resource()),
         ],
     );
     for (entry, invocations) in [("fill_rows", pair_total), ("sort_rows", patch_count), ("row_irradiance", patch_count)]

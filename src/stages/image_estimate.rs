@@ -23,7 +23,7 @@ pub const SPEC: KernelSpec = KernelSpec {
             uniform::<GpuEstimateParams>("params"),
             // Patch index + 1 per pixel.
             uint_texture("item_buffer"),
-            read::<GpuPatch>("patches"),
+            read::<GpuPatch>("patches").paged(crate::gpu::scene_buffers::PATCH_TABLE.pages),
             read::<GpuMaterial>("materials"),
             // One half of the image sum, rgb sum and w count per pixel: Le + D for the
             // `direct` entry point, G for `gather` (each half its own buffer, bound in its
@@ -48,7 +48,7 @@ pub const SPEC: KernelSpec = KernelSpec {
             // (depth bits, patch | FRAGMENT_FRONT_BIT), each line sorted by depth.
             read::<[u32; 2]>("fragments"),
             // What each patch sends the image this step (`bundle_reflect`'s image_outgoing).
-            read::<[f32; 4]>("image_outgoing"),
+            read::<[f32; 4]>("image_outgoing").paged(crate::gpu::scene_buffers::OUTGOING.pages),
         ],
     ],
 };
@@ -125,7 +125,7 @@ impl ImageEstimate {
                             ("camera", (&camera.camera).into()),
                             ("params", (&params).into()),
                             ("item_buffer", (&camera.ids_view).into()),
-                            ("patches", (&scene.patches).into()),
+                            ("patches", scene.patches.resource()),
                             ("materials", (&scene.materials).into()),
                             ("image_sum", (&sums[half]).into()),
                         ],
@@ -161,7 +161,7 @@ impl ImageEstimate {
     fn gather_group(device: &wgpu::Device, built: &Kernel, gather: Option<&GatherBuffers>) -> wgpu::BindGroup {
         let placeholder;
         let (bundle, offsets, fragments, outgoing) = match gather {
-            Some(g) => (&g.bundle, &g.offsets, &g.fragments, &g.image_outgoing),
+            Some(g) => (&g.bundle, &g.offsets, &g.fragments, &g.image_outgoing[..]),
             None => {
                 let none = wgpu::BufferUsages::empty();
                 placeholder = [
@@ -174,7 +174,7 @@ impl ImageEstimate {
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_fragments", 16, none),
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_image_outgoing", 16, none),
                 ];
-                (&placeholder[0], &placeholder[1], &placeholder[2], &placeholder[3])
+                (&placeholder[0], &placeholder[1], &placeholder[2], std::slice::from_ref(&placeholder[3]))
             }
         };
         built.bind_group(
@@ -184,7 +184,7 @@ impl ImageEstimate {
                 ("bundle", bundle.into()),
                 ("offsets", offsets.into()),
                 ("fragments", fragments.into()),
-                ("image_outgoing", outgoing.into()),
+                ("image_outgoing", crate::gpu::bindings::Resource::Pages(outgoing)),
             ],
         )
     }
