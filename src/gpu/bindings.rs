@@ -81,6 +81,13 @@ pub fn storage_buffers(spec: &KernelSpec) -> u32 {
         .sum()
 }
 
+/// How a kernel binding `resources` reaches its paged arrays: `Paging::Paged` if any of them
+/// has more than one page.
+pub fn paging(resources: &[Resource]) -> kernel::Paging {
+    let paged = resources.iter().any(|r| matches!(r, Resource::Pages(p) if p.len() > 1));
+    if paged { kernel::Paging::Paged } else { kernel::Paging::Whole }
+}
+
 /// A uniform holding one `T`.
 pub const fn uniform<T>(name: &'static str) -> Binding {
     Binding { name, kind: BindKind::Uniform { min_size: std::mem::size_of::<T>() as u64 }, pages: 1 }
@@ -288,9 +295,14 @@ impl KernelSpec {
         fold_2d(n.div_ceil(x))
     }
 
-    /// The shader module of `wgsl/<stem>.wgsl`.
-    pub fn module(&self, device: &wgpu::Device) -> wgpu::ShaderModule {
-        kernel::module(device, self.stem)
+    /// The shader module of `wgsl/<stem>.wgsl`, its paged arrays reached as `paging` says.
+    pub fn module(&self, device: &wgpu::Device, paging: kernel::Paging) -> wgpu::ShaderModule {
+        kernel::module(device, self.stem, paging)
+    }
+
+    /// Whether any binding is paged (`Binding::paged`).
+    pub fn has_paged_bindings(&self) -> bool {
+        self.groups.iter().flat_map(|g| g.iter()).any(|b| b.pages > 1)
     }
 
     /// One bind-group layout per group, labelled `firstshot.<stem>.layout` (group 0) and
@@ -313,12 +325,19 @@ impl KernelSpec {
     }
 
     /// The module, the bind-group layouts and the pipeline layout, which every stage builds
-    /// first.
+    /// first; for a kernel without paged bindings (else `build_paged`).
     pub fn build(&self, device: &wgpu::Device) -> Kernel {
+        assert!(!self.has_paged_bindings(), "{}: has paged bindings; build it with build_paged", self.stem);
+        self.build_paged(device, kernel::Paging::Whole)
+    }
+
+    /// As `build`, the paged arrays reached as `paging` says: `Paging::Whole` only when every
+    /// array bound to a paged binding has one page in this run.
+    pub fn build_paged(&self, device: &wgpu::Device, paging: kernel::Paging) -> Kernel {
         let layouts = self.layouts(device);
         Kernel {
             spec: *self,
-            module: self.module(device),
+            module: self.module(device, paging),
             pipeline_layout: self.pipeline_layout(device, &layouts),
             layouts,
         }

@@ -34,8 +34,41 @@ pub const KERNELS: &[(&str, &str)] = &[
     ("first_shot_table", include_str!("../../wgsl/first_shot_table.wgsl")),
 ];
 
-/// The full source of one kernel: generated header, common files, the kernel itself.
+/// How a kernel reaches its paged arrays (`gpu::bindings::Binding::paged`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Paging {
+    /// Every paged array of the run fits in its first page: the accessors become plain
+    /// indexing of page 0 (`patches_at(i).normal` is `patches[i].normal`), so that the
+    /// driver loads the one field, not the whole struct through a branch over pages, which
+    /// doubled the step time on lavapipe.
+    Whole,
+    /// Some array spans pages: the accessors pick the page (`paged_arrays`).
+    Paged,
+}
+
+impl Paging {
+    /// `Paged` if any array of `bytes` per element (one per patch) for `n` elements exceeds a
+    /// page of `page_bytes`.
+    pub fn of(n: u64, bytes: &[u64], page_bytes: u64) -> Paging {
+        if bytes.iter().any(|b| n.max(1) * b > page_bytes) { Paging::Paged } else { Paging::Whole }
+    }
+
+    /// `Paged` if either is.
+    pub fn or(self, other: Paging) -> Paging {
+        if self == Paging::Paged || other == Paging::Paged { Paging::Paged } else { Paging::Whole }
+    }
+}
+
+/// The full source of one kernel with accessors that pick the page (`Paging::Paged`), the
+/// form the binding checks read.
 pub fn source(stem: &str) -> String {
+    source_with(stem, Paging::Paged)
+}
+
+/// The full source of one kernel: generated header, common files, the kernel itself, then
+/// the pages of its paged arrays and their accessors, or, with `Paging::Whole`, the
+/// accessors' calls rewritten as indexing of the first page.
+pub fn source_with(stem: &str, paging: Paging) -> String {
     let body = KERNELS
         .iter()
         .find(|(s, _)| *s == stem)
@@ -54,6 +87,12 @@ pub fn source(stem: &str) -> String {
     out.push_str(&format!("\n// ---- {stem}.wgsl\n"));
     out.push_str(body);
     if let Some(spec) = crate::stages::SPECS.iter().find(|s| s.stem == stem) {
+        if paging == Paging::Whole {
+            for b in spec.groups.iter().flat_map(|g| g.iter()).filter(|b| b.pages > 1) {
+                out = index_first_page(&out, b.name);
+            }
+            return out;
+        }
         let pages = paged_arrays(spec, &out);
         if !pages.is_empty() {
             out.push_str("\n// ---- generated: the pages of the paged arrays (gpu::bindings::Binding)\n");
@@ -118,11 +157,68 @@ fn paged_arrays(spec: &crate::gpu::bindings::KernelSpec, src: &str) -> String {
     out
 }
 
+/// `src` with every call of paged array `name`'s accessors written as indexing of its first
+/// page: `name_at(i)` as `name[i]`, `name_set(i, v)` as `name[i] = v` (a statement),
+/// `name_add(i, v)` as `atomicAdd(&name[i], v)`. Calls nested in the arguments are rewritten
+/// too.
+fn index_first_page(src: &str, name: &str) -> String {
+    let is_ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let mut out = String::with_capacity(src.len());
+    let mut rest = src;
+    'scan: while let Some(at) = rest.find(name) {
+        let before_ok = rest[..at].chars().next_back().is_none_or(|c| !is_ident(c));
+        let after = &rest[at + name.len()..];
+        for (suffix, kind) in [("_at(", 0), ("_set(", 1), ("_add(", 2)] {
+            if !(before_ok && after.starts_with(suffix)) {
+                continue;
+            }
+            let open = at + name.len() + suffix.len();
+            // The matching parenthesis and the top-level commas of the arguments.
+            let (mut depth, mut commas, mut close) = (1, Vec::new(), None);
+            for (k, c) in rest[open..].char_indices() {
+                match c {
+                    '(' | '[' => depth += 1,
+                    ')' | ']' => {
+                        depth -= 1;
+                        if depth == 0 {
+                            close = Some(open + k);
+                            break;
+                        }
+                    }
+                    ',' if depth == 1 => commas.push(open + k),
+                    _ => {}
+                }
+            }
+            let close = close.unwrap_or_else(|| panic!("`{name}{suffix}` without its closing parenthesis"));
+            let mut args = Vec::new();
+            let mut from = open;
+            for &c in commas.iter().chain([&close]) {
+                args.push(index_first_page(rest[from..c].trim(), name));
+                from = c + 1;
+            }
+            let want = if kind == 0 { 1 } else { 2 };
+            assert!(args.len() == want, "`{name}{suffix}` takes {want} arguments, given {}", args.len());
+            out.push_str(&rest[..at]);
+            out.push_str(&match kind {
+                0 => format!("{name}[{}]", args[0]),
+                1 => format!("{name}[{}] = {}", args[0], args[1]),
+                _ => format!("atomicAdd(&{name}[{}], {})", args[0], args[1]),
+            });
+            rest = &rest[close + 1..];
+            continue 'scan;
+        }
+        out.push_str(&rest[..at + name.len()]);
+        rest = after;
+    }
+    out.push_str(rest);
+    out
+}
+
 /// Compiles a kernel into a shader module labelled `firstshot.<stem>`.
-pub fn module(device: &wgpu::Device, stem: &str) -> wgpu::ShaderModule {
+pub fn module(device: &wgpu::Device, stem: &str, paging: Paging) -> wgpu::ShaderModule {
     device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(&format!("firstshot.{stem}")),
-        source: wgpu::ShaderSource::Wgsl(source(stem).into()),
+        source: wgpu::ShaderSource::Wgsl(source_with(stem, paging).into()),
     })
 }
 
@@ -162,12 +258,46 @@ pub fn dispatch(
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn every_kernel_parses_and_validates() {
-        for (stem, _) in super::KERNELS {
-            if let Err(e) = super::validate(stem) {
+        for (stem, _) in KERNELS {
+            if let Err(e) = validate(stem) {
                 panic!("wgsl/{stem}.wgsl does not validate:\n{e}");
             }
         }
+    }
+
+    #[test]
+    fn every_kernel_validates_with_its_paged_arrays_indexed_whole() {
+        for (stem, _) in KERNELS {
+            let src = source_with(stem, Paging::Whole);
+            let module = naga::front::wgsl::parse_str(&src)
+                .unwrap_or_else(|e| panic!("wgsl/{stem}.wgsl, Paging::Whole:\n{}", e.emit_to_string(&src)));
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+                .validate(&module)
+                .unwrap_or_else(|e| panic!("wgsl/{stem}.wgsl, Paging::Whole:\n{}", e.emit_to_string(&src)));
+            for b in crate::stages::SPECS.iter().filter(|s| s.stem == *stem).flat_map(|s| s.groups.iter().copied()).flatten() {
+                if b.pages > 1 {
+                    for accessor in ["_at(", "_set(", "_add("] {
+                        let call = format!("{}{accessor}", b.name);
+                        let left = src
+                            .match_indices(&call)
+                            .any(|(i, _)| !src[..i].ends_with(|c: char| c.is_ascii_alphanumeric() || c == '_'));
+                        assert!(!left, "wgsl/{stem}.wgsl, Paging::Whole: a call of `{call}` is left");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn accessor_calls_become_indexing() {
+        let src = "let a = p_at(i).v0.xyz + q_p_at(1u); p_set(k, p_at(f(j, 2u)));\nlet o = p_add(6u * j, low);";
+        assert_eq!(
+            index_first_page(src, "p"),
+            "let a = p[i].v0.xyz + q_p_at(1u); p[k] = p[f(j, 2u)];\nlet o = atomicAdd(&p[6u * j], low);"
+        );
     }
 }

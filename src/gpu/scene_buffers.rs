@@ -121,6 +121,12 @@ impl Paged {
         Paged { pages, bytes: std::mem::size_of_val(data) as u64 }
     }
 
+    /// `Paging::Whole` if the array has one page.
+    pub fn paging(&self) -> crate::gpu::kernel::Paging {
+        use crate::gpu::kernel::Paging;
+        if self.pages.len() > 1 { Paging::Paged } else { Paging::Whole }
+    }
+
     /// The binding resource of all pages.
     pub fn resource(&self) -> bindings::Resource<'_> {
         bindings::Resource::Pages(&self.pages)
@@ -310,6 +316,13 @@ pub fn bounding_sphere(patches: &Patches) -> (DVec3, f64) {
 }
 
 impl SceneBuffers {
+    /// How kernels reach the per-patch arrays of this scene (`PAGED_ARRAYS`, all in pages of
+    /// `page_bytes`): `Paging::Whole` when each fits in one page.
+    pub fn paging(&self) -> crate::gpu::kernel::Paging {
+        let bytes: Vec<u64> = PAGED_ARRAYS.iter().map(|a| a.bytes).collect();
+        crate::gpu::kernel::Paging::of(self.patch_count as u64, &bytes, self.page_bytes)
+    }
+
     pub fn new(device: &wgpu::Device, scene: &Scene, patches: &Patches, first_shot: bool) -> SceneBuffers {
         Self::with_pages(device, scene, patches, first_shot, page_bytes(&device.limits(), None))
     }

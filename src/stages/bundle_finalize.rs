@@ -32,7 +32,7 @@ pub struct BundleFinalize {
 impl BundleFinalize {
     /// `buffers`: bundle, patches, sums, max_bits, outgoing, state (`SPEC`'s group 0).
     pub fn new(device: &wgpu::Device, buffers: [Resource; 6], patch_count: u32) -> Self {
-        let built = SPEC.build(device);
+        let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
         BundleFinalize {
             pipeline: built.compute_pipeline(device, "main"),
             bind_group: built.resource_bind_group(device, 0, &buffers),

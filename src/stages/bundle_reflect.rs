@@ -46,7 +46,7 @@ impl BundleReflect {
         max_bits: &wgpu::Buffer,
         image_outgoing: &Paged,
     ) -> Self {
-        let built = SPEC.build(device);
+        let built = SPEC.build_paged(device, scene.paging());
         BundleReflect {
             pipeline: built.compute_pipeline(device, "main"),
             bind_group: built.bind_group(

@@ -36,7 +36,7 @@ pub struct BundleTransfer {
 impl BundleTransfer {
     /// `buffers`: bundle, offsets, fragments, outgoing, sums, max_bits (`SPEC`'s group 0).
     pub fn new(device: &wgpu::Device, buffers: [Resource; 6], lines: u32) -> Self {
-        let built = SPEC.build(device);
+        let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
         BundleTransfer {
             pipeline: built.compute_pipeline(device, "main"),
             bind_group: built.resource_bind_group(device, 0, &buffers),

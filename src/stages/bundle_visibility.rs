@@ -40,7 +40,7 @@ impl BundleVisibility {
     /// `buffers`: bundle, counts, offsets, cursor, fragments, overflow, outgoing (`SPEC`'s
     /// group 0).
     pub fn new(device: &wgpu::Device, buffers: [Resource; 7], resolution: u32) -> Self {
-        let built = SPEC.build(device);
+        let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
         let pipeline = |entry: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(&format!("firstshot.bundle_visibility.{entry}")),

@@ -59,7 +59,6 @@ pub struct FirstShotReduce {
 
 impl FirstShotReduce {
     pub fn new(device: &wgpu::Device, scene: &SceneBuffers, faces: &CameraItemBuffer, capacity: u32) -> Self {
-        let built = SPEC.build(device);
         let n = scene.patch_count as u64;
         let none = wgpu::BufferUsages::empty();
         let face_params = buffers::uniform(
@@ -84,6 +83,7 @@ impl FirstShotReduce {
         );
         let pair_count =
             buffers::storage_zeroed(device, "firstshot.first_shot_reduce.pair_count", 4, wgpu::BufferUsages::COPY_SRC);
+        let built = SPEC.build_paged(device, scene.paging().or(pairs.paging()));
         let bind_group = built.bind_group(
             device,
             0,

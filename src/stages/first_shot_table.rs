@@ -64,7 +64,7 @@ pub fn build(
     let scan = PrefixSum::new(device, patch_count + 1, row_counts, &offsets);
     scan.record(encoder);
 
-    let built = SPEC.build(device);
+    let built = SPEC.build_paged(device, scene.paging().or(pairs.paging()));
     let bind_group = built.bind_group(
         device,
         0,

@@ -101,7 +101,7 @@ impl ImageEstimate {
         gather: Option<&GatherBuffers>,
         band_rows: u32,
     ) -> Self {
-        let built = SPEC.build(device);
+        let built = SPEC.build_paged(device, scene.paging());
         let direct_pipeline = built.compute_pipeline(device, "direct");
         let gather_pipeline = built.compute_pipeline(device, "gather");
         let band_rows = band_rows.max(1);
