@@ -10,7 +10,7 @@ mod stats;
 #[allow(dead_code)]
 mod svg;
 
-use stats::{Reach, equal_error_speedups, summary, time_to_reach};
+use stats::{Reach, equal_error_speedups, parse_image_size, summary, time_to_reach};
 
 /// Float comparisons of closed-form values: only rounding separates them.
 const EPS: f64 = 1e-9;
@@ -113,4 +113,14 @@ fn test06_svg_linear_axes_and_number_labels() {
     let text = svg::render(&plot);
     assert!(text.contains(">0<"), "linear axes of positive data start at 0");
     assert_eq!(text.matches("<polyline").count(), 1);
+}
+
+#[test]
+fn test07_image_sizes_parse_and_bad_ones_say_how_to_write_them() {
+    assert_eq!(parse_image_size("7680x4320"), Ok((7680, 4320)));
+    assert_eq!(parse_image_size(" 512X288 "), Ok((512, 288)));
+    for bad in ["512", "0x512", "512x", "x", "512x-1", "a x b"] {
+        let e = parse_image_size(bad).unwrap_err();
+        assert!(e.contains(bad) && e.contains("WIDTHxHEIGHT"), "{bad}: {e}");
+    }
 }

@@ -100,6 +100,15 @@ struct Args {
     /// Bundle resolutions of the scaling study (default 256,512,1024,2048; --quick 64,128).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     resolutions: Option<Vec<u32>>,
+    /// Patch sizes of the scaling study's whole-process runs of the Sierpinski scene
+    /// (`firstshot --patch-size X`, 128 x 128 image, two image steps; default 0.35,0.1,0.03;
+    /// --quick 0.35). 0.0085 gives 10 M patches (docs/PERFORMANCE.md, Scaling).
+    #[arg(long, value_delimiter = ',', value_name = "LIST")]
+    patch_sizes: Option<Vec<f64>>,
+    /// Image sizes WxH of the scaling study's whole-process runs of the Cornell box (two
+    /// image steps; default 512x512,2048x2048; --quick 256x256). 7680x4320 is 8K.
+    #[arg(long, value_delimiter = ',', value_name = "LIST")]
+    images: Option<Vec<String>>,
     /// Steps per timed configuration of the scaling study (default 20; --quick 4).
     #[arg(long, value_name = "N")]
     scaling_steps: Option<u32>,
@@ -143,6 +152,8 @@ pub struct Config {
     pub levels: Vec<u32>,
     pub resolutions: Vec<u32>,
     pub scaling_steps: u32,
+    pub patch_sizes: Vec<f64>,
+    pub images: Vec<(u32, u32)>,
     pub peer_size: u32,
     pub peer_steps: Vec<u32>,
     pub peer_spp: Vec<u32>,
@@ -391,6 +402,17 @@ fn main() -> ExitCode {
     } else {
         vec!["sierpinski".to_string(), "cornell_box".to_string()]
     };
+    let images = match &args.images {
+        Some(list) => match list.iter().map(|s| stats::parse_image_size(s)).collect::<Result<Vec<_>, _>>() {
+            Ok(sizes) => sizes,
+            Err(e) => {
+                eprintln!("error: --images: {e}");
+                return ExitCode::from(2);
+            }
+        },
+        None if quick => vec![(256, 256)],
+        None => vec![(512, 512), (2048, 2048)],
+    };
     let config = Config {
         quick,
         timestamps: !args.no_timestamps,
@@ -411,6 +433,8 @@ fn main() -> ExitCode {
         levels: args.levels.clone().unwrap_or(if quick { vec![3, 4, 5] } else { vec![3, 4, 5, 6, 7] }),
         resolutions: args.resolutions.clone().unwrap_or(if quick { vec![64, 128] } else { vec![256, 512, 1024, 2048] }),
         scaling_steps: args.scaling_steps.unwrap_or(if quick { 4 } else { 20 }).max(1),
+        patch_sizes: args.patch_sizes.clone().unwrap_or(if quick { vec![0.35] } else { vec![0.35, 0.1, 0.03] }),
+        images,
         peer_size: args.peer_size.unwrap_or(if quick { 128 } else { 256 }).max(2),
         peer_steps: args.peer_steps.clone().unwrap_or(if quick {
             vec![4, 16, 64, 256]

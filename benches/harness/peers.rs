@@ -118,12 +118,12 @@ pub fn ratio(firstshot: &Option<Reach>, mitsuba: &Option<Reach>) -> String {
     }
 }
 
-fn firstshot_bin() -> PathBuf {
+pub fn firstshot_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_firstshot"))
 }
 
 /// Runs `cmd`, timing the whole process; an error carries its stderr's tail.
-fn timed(cmd: &mut Command) -> Result<f64, String> {
+pub fn timed(cmd: &mut Command) -> Result<f64, String> {
     let start = Instant::now();
     let out = cmd.output().map_err(|e| format!("{cmd:?}: {e}"))?;
     let seconds = start.elapsed().as_secs_f64();
@@ -141,7 +141,7 @@ fn timed(cmd: &mut Command) -> Result<f64, String> {
 
 /// The adapter spec to give `firstshot --adapter` for this slot: a CPU adapter by its
 /// backend (lavapipe and llvmpipe share a name), a GPU by its name.
-fn adapter_arg(slot: &Slot) -> String {
+pub fn adapter_arg(slot: &Slot) -> String {
     if slot.adapter.device_type == "Cpu" { slot.adapter.backend.to_lowercase() } else { slot.adapter.name.clone() }
 }
 

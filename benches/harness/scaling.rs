@@ -1,6 +1,9 @@
 //! Scaling: step time against patch count (the Sierpinski scene at levels 3 to 7, built in
 //! memory from scenes/sierpinski.toml) and against bundle resolution, with the fragments of
-//! a step and each stage's time, so the growth can be read per stage.
+//! a step and each stage's time, so the growth can be read per stage; then, as whole
+//! `firstshot` processes, the large series: the Sierpinski scene cut finer (`--patch-sizes`,
+//! up to 10 M patches) and the Cornell box at large images (`--images`, up to 8K), with the
+//! memory predicted and the process's peak.
 
 use crate::session::{IDLE, Session, own_time};
 use crate::stats::{Summary, median, summary};
@@ -34,6 +37,8 @@ struct Report<'a> {
     steps: u32,
     repeats: usize,
     rows: &'a [Row],
+    /// The whole-process runs: patch sizes and image sizes.
+    process_rows: &'a [ProcessRow],
 }
 
 const BATCH: u32 = 4;
@@ -134,6 +139,8 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
         rows.push(row);
     }
     print_rows(&rows);
+    let process_rows = process_rows(config, slot);
+    print_process_rows(&process_rows);
     let path = write_json(
         &config.out,
         "scaling.json",
@@ -144,11 +151,12 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
             steps: config.scaling_steps,
             repeats: config.repeats,
             rows: &rows,
+            process_rows: &process_rows,
         },
     )?;
     write_plots(config, slot, &rows)?;
     println!("wrote {} and scaling_patches.svg, scaling_resolution.svg", path.display());
-    if rows.iter().all(|r| r.error.is_some()) {
+    if rows.iter().all(|r| r.error.is_some()) && process_rows.iter().all(|r| r.error.is_some()) {
         return Err("nothing measured".into());
     }
     Ok(())
@@ -239,4 +247,179 @@ fn write_plots(config: &Config, slot: &Slot, rows: &[Row]) -> Result<(), String>
     write_text(&config.out, "scaling_patches.svg", &crate::svg::render(&patches))?;
     write_text(&config.out, "scaling_resolution.svg", &crate::svg::render(&resolution))?;
     Ok(())
+}
+
+/// One whole-process run of the scaling study's large series: a scene at a patch size
+/// (`patch_size`) or an image size (`image`), two image steps and no burn-in, as
+/// `firstshot SCENE ... --iterations 2 --burn-in 0 --stats` reports it; repeated, medians.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProcessRow {
+    pub study: &'static str,
+    pub scene: String,
+    pub patch_size: Option<f64>,
+    pub width: u32,
+    pub height: u32,
+    pub patches: u64,
+    pub first_shot_ms: f64,
+    pub first_shot_pairs: u64,
+    /// The run's median step (`iteration_ms_median`), per repeat.
+    pub step_ms: Summary,
+    pub upload_ms: f64,
+    /// The image sums brought back and averaged: `image_ms` less the steps.
+    pub read_back_ms: f64,
+    /// Predicted GPU bytes (`memory.device_bytes`).
+    pub device_bytes: u64,
+    /// Predicted host bytes, with the GPU's where it is the host's (`total_host_bytes`).
+    pub total_host_bytes: u64,
+    /// The process's resident peak (`memory.peak_rss_bytes`), the largest of the repeats.
+    pub peak_rss_bytes: Option<u64>,
+    /// Wall time of the whole process, per repeat.
+    pub wall_s: Summary,
+    pub error: Option<String>,
+}
+
+/// Runs `firstshot` on `scene` with `extra` flags `repeats` times and reads its stats.
+fn process_row(
+    config: &Config,
+    slot: &Slot,
+    study: &'static str,
+    scene: &str,
+    patch_size: Option<f64>,
+    size: (u32, u32),
+) -> Result<ProcessRow, String> {
+    use crate::peers::{adapter_arg, firstshot_bin, timed};
+    let dir = config.out.join("scaling_runs");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let tag = match patch_size {
+        Some(p) => format!("{scene}_patch_{p}"),
+        None => format!("{scene}_{}x{}", size.0, size.1),
+    };
+    let (stats_path, out) = (dir.join(format!("{tag}.json")), dir.join(format!("{tag}.exr")));
+    let (mut steps, mut walls, mut peak) = (Vec::new(), Vec::new(), None::<u64>);
+    let mut stats = serde_json::Value::Null;
+    for _ in 0..config.repeats {
+        let mut cmd = std::process::Command::new(firstshot_bin());
+        cmd.arg(scene_path(scene)).arg("--out").arg(&out).arg("--stats").arg(&stats_path).arg("--quiet");
+        cmd.args(["--iterations", "2", "--burn-in", "0", "--adapter", &adapter_arg(slot)]);
+        cmd.args(["--width", &size.0.to_string(), "--height", &size.1.to_string()]);
+        if let Some(p) = patch_size {
+            cmd.args(["--patch-size", &p.to_string()]);
+        }
+        walls.push(timed(&mut cmd)?);
+        let text = std::fs::read_to_string(&stats_path).map_err(|e| format!("{}: {e}", stats_path.display()))?;
+        stats = serde_json::from_str(&text).map_err(|e| format!("{}: {e}", stats_path.display()))?;
+        steps.push(stats["iteration_ms_median"].as_f64().ok_or("no iteration_ms_median in the stats")?);
+        if let Some(p) = stats["memory"]["peak_rss_bytes"].as_u64() {
+            peak = Some(peak.map_or(p, |q| q.max(p)));
+        }
+    }
+    let f = |key: &str| stats[key].as_f64().unwrap_or(f64::NAN);
+    // `iteration_ms`: all steps of the run; `image_ms` holds them and the read-back.
+    let steps_total = f("iteration_ms");
+    Ok(ProcessRow {
+        study,
+        scene: scene.to_string(),
+        patch_size,
+        width: size.0,
+        height: size.1,
+        patches: stats["patches"].as_u64().unwrap_or(0),
+        first_shot_ms: f("first_shot_ms"),
+        first_shot_pairs: stats["first_shot_pairs"].as_u64().unwrap_or(0),
+        step_ms: summary(&steps),
+        upload_ms: f("upload_ms"),
+        read_back_ms: f("image_ms") - steps_total,
+        device_bytes: stats["memory"]["device_bytes"].as_u64().unwrap_or(0),
+        total_host_bytes: stats["memory"]["total_host_bytes"].as_u64().unwrap_or(0),
+        peak_rss_bytes: peak,
+        wall_s: summary(&walls),
+        error: None,
+    })
+}
+
+/// The large series, whole processes: the Sierpinski scene at `config.patch_sizes` and the
+/// Cornell box at `config.images`, smallest first (a failure, e.g. out of memory, is a
+/// row of its own).
+fn process_rows(config: &Config, slot: &Slot) -> Vec<ProcessRow> {
+    let mut plan: Vec<(&'static str, &str, Option<f64>, (u32, u32))> =
+        config.patch_sizes.iter().map(|&p| ("patch_size", "sierpinski", Some(p), (128, 128))).collect();
+    plan.extend(config.images.iter().map(|&s| ("image", "cornell_box", None, s)));
+    plan.into_iter()
+        .map(|(study, scene, patch_size, size)| {
+            eprintln!(
+                "{study}: {scene}, {}x{}{}",
+                size.0,
+                size.1,
+                patch_size.map_or(String::new(), |p| format!(", --patch-size {p}"))
+            );
+            guarded(|| process_row(config, slot, study, scene, patch_size, size)).unwrap_or_else(|e| {
+                eprintln!("  FAILED: {e}");
+                ProcessRow {
+                    study,
+                    scene: scene.to_string(),
+                    patch_size,
+                    width: size.0,
+                    height: size.1,
+                    patches: 0,
+                    first_shot_ms: f64::NAN,
+                    first_shot_pairs: 0,
+                    step_ms: summary(&[]),
+                    upload_ms: f64::NAN,
+                    read_back_ms: f64::NAN,
+                    device_bytes: 0,
+                    total_host_bytes: 0,
+                    peak_rss_bytes: None,
+                    wall_s: summary(&[]),
+                    error: Some(e),
+                }
+            })
+        })
+        .collect()
+}
+
+fn print_process_rows(rows: &[ProcessRow]) {
+    let mib = |b: u64| format!("{:.0}", b as f64 / (1u64 << 20) as f64);
+    let headers = [
+        "study",
+        "scene",
+        "patch size",
+        "image",
+        "patches",
+        "first shot s (pairs)",
+        "step ms",
+        "upload ms",
+        "read-back ms",
+        "device MiB",
+        "host MiB (all)",
+        "peak RSS MiB",
+        "wall s",
+    ];
+    let table: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            let mut row = vec![
+                r.study.to_string(),
+                r.scene.clone(),
+                r.patch_size.map_or("-".into(), |p| p.to_string()),
+                format!("{}x{}", r.width, r.height),
+            ];
+            if let Some(e) = &r.error {
+                row.push(format!("FAILED: {e}"));
+                return row;
+            }
+            row.extend([
+                r.patches.to_string(),
+                format!("{:.2} ({:.2} M)", r.first_shot_ms / 1e3, r.first_shot_pairs as f64 / 1e6),
+                crate::spread(&r.step_ms, 1),
+                format!("{:.0}", r.upload_ms),
+                format!("{:.0}", r.read_back_ms),
+                mib(r.device_bytes),
+                mib(r.total_host_bytes),
+                r.peak_rss_bytes.map_or("?".into(), mib),
+                crate::spread(&r.wall_s, 2),
+            ]);
+            row
+        })
+        .collect();
+    println!("(whole processes: two image steps, no burn-in; memory predicted, and the peak of the repeats)");
+    print_table(&headers, &table);
 }

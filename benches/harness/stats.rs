@@ -127,3 +127,12 @@ pub fn equal_error_speedups(fast: &[(f64, f64)], slow: &[(f64, f64)]) -> Vec<Spe
         })
         .collect()
 }
+
+/// `WIDTHxHEIGHT`, both at least 1.
+pub fn parse_image_size(text: &str) -> Result<(u32, u32), String> {
+    let parse = |s: &str| s.trim().parse::<u32>().ok().filter(|&v| v > 0);
+    match text.split_once(['x', 'X']).and_then(|(w, h)| Some((parse(w)?, parse(h)?))) {
+        Some(size) => Ok(size),
+        None => Err(format!("`{text}` is not an image size; write WIDTHxHEIGHT, e.g. 7680x4320")),
+    }
+}

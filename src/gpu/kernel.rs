@@ -278,7 +278,9 @@ mod tests {
             naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
                 .validate(&module)
                 .unwrap_or_else(|e| panic!("wgsl/{stem}.wgsl, Paging::Whole:\n{}", e.emit_to_string(&src)));
-            for b in crate::stages::SPECS.iter().filter(|s| s.stem == *stem).flat_map(|s| s.groups.iter().copied()).flatten() {
+            for b in
+                crate::stages::SPECS.iter().filter(|s| s.stem == *stem).flat_map(|s| s.groups.iter().copied()).flatten()
+            {
                 if b.pages > 1 {
                     for accessor in ["_at(", "_set(", "_add("] {
                         let call = format!("{}{accessor}", b.name);
