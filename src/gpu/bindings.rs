@@ -55,14 +55,16 @@ pub struct Entry {
 }
 
 /// The layout entries of a group's `bindings`: binding i at i, then the pages after the first
-/// of each paged binding, in order.
-pub fn entries(bindings: &[Binding]) -> Vec<Entry> {
+/// of each paged binding, in order; with `Paging::Whole` none of those (the kernel indexes
+/// page 0 alone, and lavapipe slows every dispatch down by a multiple for bindings a shader
+/// leaves unused: tests/iteration.rs test02 took 8.6 s with them, 3.3 s without).
+pub fn entries(bindings: &[Binding], paging: kernel::Paging) -> Vec<Entry> {
     let mut out: Vec<Entry> = bindings
         .iter()
         .enumerate()
         .map(|(i, b)| Entry { binding: i as u32, name: b.name.to_string(), kind: b.kind, index: i, page: 0 })
         .collect();
-    for (i, b) in bindings.iter().enumerate() {
+    for (i, b) in bindings.iter().enumerate().filter(|_| paging == kernel::Paging::Paged) {
         for page in 1..b.pages {
             let binding = out.len() as u32;
             out.push(Entry { binding, name: format!("{}_{page}", b.name), kind: b.kind, index: i, page });
@@ -153,14 +155,15 @@ pub fn binding_visibility(kind: BindKind, visibility: wgpu::ShaderStages) -> wgp
     }
 }
 
-/// The bind-group layout of `bindings`, entry i at binding i.
+/// The bind-group layout of `bindings` (`entries`).
 pub fn group_layout(
     device: &wgpu::Device,
     label: &str,
     visibility: wgpu::ShaderStages,
     bindings: &[Binding],
+    paging: kernel::Paging,
 ) -> wgpu::BindGroupLayout {
-    let entries: Vec<wgpu::BindGroupLayoutEntry> = entries(bindings)
+    let entries: Vec<wgpu::BindGroupLayoutEntry> = entries(bindings, paging)
         .into_iter()
         .map(|b| wgpu::BindGroupLayoutEntry {
             binding: b.binding,
@@ -213,13 +216,15 @@ impl<'a> From<&'a wgpu::TextureView> for Resource<'a> {
     }
 }
 
-/// A bind group over `layout` (built from `bindings`) with `resources` named as the bindings
-/// are, in order. A name, count or kind that differs is a programming error: it panics.
+/// A bind group over `layout` (built from `bindings` with `paging`) with `resources` named as
+/// the bindings are, in order. A name, count or kind that differs is a programming error: it
+/// panics, as does an array of several pages given to a kernel that indexes page 0 alone.
 pub fn bind_group(
     device: &wgpu::Device,
     label: &str,
     layout: &wgpu::BindGroupLayout,
     bindings: &[Binding],
+    paging: kernel::Paging,
     resources: &[(&str, Resource)],
 ) -> wgpu::BindGroup {
     let names = || bindings.iter().map(|b| b.name).collect::<Vec<_>>();
@@ -230,7 +235,7 @@ pub fn bind_group(
         bindings.len(),
         names()
     );
-    let entries: Vec<wgpu::BindGroupEntry> = entries(bindings)
+    let entries: Vec<wgpu::BindGroupEntry> = entries(bindings, paging)
         .into_iter()
         .map(|e| {
             let (i, b, (name, resource)) = (e.index, &bindings[e.index], &resources[e.index]);
@@ -242,6 +247,11 @@ pub fn bind_group(
                         "{label}: {} pages for `{name}`, which has {}",
                         pages.len(),
                         b.pages
+                    );
+                    assert!(
+                        paging == kernel::Paging::Paged || pages.len() == 1,
+                        "{label}: {} pages for `{name}`, bound to a kernel built for one (Paging::Whole)",
+                        pages.len()
                     );
                     pages.get(e.page as usize).unwrap_or(&pages[0]).as_entire_binding()
                 }
@@ -307,9 +317,9 @@ impl KernelSpec {
 
     /// One bind-group layout per group, labelled `firstshot.<stem>.layout` (group 0) and
     /// `firstshot.<stem>.group<g>.layout`.
-    pub fn layouts(&self, device: &wgpu::Device) -> Vec<wgpu::BindGroupLayout> {
+    pub fn layouts(&self, device: &wgpu::Device, paging: kernel::Paging) -> Vec<wgpu::BindGroupLayout> {
         (0..self.groups.len())
-            .map(|g| group_layout(device, &self.label(g, "layout"), self.visibility, self.groups[g]))
+            .map(|g| group_layout(device, &self.label(g, "layout"), self.visibility, self.groups[g], paging))
             .collect()
     }
 
@@ -334,12 +344,13 @@ impl KernelSpec {
     /// As `build`, the paged arrays reached as `paging` says: `Paging::Whole` only when every
     /// array bound to a paged binding has one page in this run.
     pub fn build_paged(&self, device: &wgpu::Device, paging: kernel::Paging) -> Kernel {
-        let layouts = self.layouts(device);
+        let layouts = self.layouts(device, paging);
         Kernel {
             spec: *self,
             module: self.module(device, paging),
             pipeline_layout: self.pipeline_layout(device, &layouts),
             layouts,
+            paging,
         }
     }
 
@@ -362,15 +373,17 @@ impl KernelSpec {
         })
     }
 
-    /// Bind group `group` over its layout, `resources` named as the spec's bindings.
+    /// Bind group `group` over its layout (made with `paging`), `resources` named as the
+    /// spec's bindings.
     pub fn bind_group(
         &self,
         device: &wgpu::Device,
         group: usize,
         layout: &wgpu::BindGroupLayout,
+        paging: kernel::Paging,
         resources: &[(&str, Resource)],
     ) -> wgpu::BindGroup {
-        bind_group(device, &self.label(group, "bind_group"), layout, self.groups[group], resources)
+        bind_group(device, &self.label(group, "bind_group"), layout, self.groups[group], paging, resources)
     }
 
     /// As `bind_group`, for a group of buffers given in binding order (whole buffers).
@@ -379,6 +392,7 @@ impl KernelSpec {
         device: &wgpu::Device,
         group: usize,
         layout: &wgpu::BindGroupLayout,
+        paging: kernel::Paging,
         buffers: &[&wgpu::Buffer],
     ) -> wgpu::BindGroup {
         let bindings = self.groups[group];
@@ -391,7 +405,7 @@ impl KernelSpec {
         );
         let named: Vec<(&str, Resource)> =
             bindings.iter().zip(buffers).map(|(b, buf)| (b.name, (*buf).into())).collect();
-        self.bind_group(device, group, layout, &named)
+        self.bind_group(device, group, layout, paging, &named)
     }
 
     fn label(&self, group: usize, what: &str) -> String {
@@ -409,6 +423,8 @@ pub struct Kernel {
     /// One per bind group.
     pub layouts: Vec<wgpu::BindGroupLayout>,
     pub pipeline_layout: wgpu::PipelineLayout,
+    /// How its WGSL reaches the paged arrays, and so which page bindings its layouts have.
+    pub paging: kernel::Paging,
 }
 
 impl Kernel {
@@ -419,12 +435,12 @@ impl Kernel {
 
     /// Bind group `group`, `resources` named as the spec's bindings, in order.
     pub fn bind_group(&self, device: &wgpu::Device, group: usize, resources: &[(&str, Resource)]) -> wgpu::BindGroup {
-        self.spec.bind_group(device, group, &self.layouts[group], resources)
+        self.spec.bind_group(device, group, &self.layouts[group], self.paging, resources)
     }
 
     /// Bind group `group` of whole buffers, in binding order.
     pub fn buffer_bind_group(&self, device: &wgpu::Device, group: usize, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
-        self.spec.buffer_bind_group(device, group, &self.layouts[group], buffers)
+        self.spec.buffer_bind_group(device, group, &self.layouts[group], self.paging, buffers)
     }
 
     /// Bind group `group` of `resources` in binding order (whole buffers or pages).
@@ -455,7 +471,7 @@ pub fn fold_2d(blocks: u32) -> (u32, u32) {
 pub fn check(spec: &KernelSpec, module: &naga::Module, info: &naga::valid::ModuleInfo) -> Vec<String> {
     let mut errors = Vec::new();
     let stem = spec.stem;
-    let groups: Vec<Vec<Entry>> = spec.groups.iter().map(|g| entries(g)).collect();
+    let groups: Vec<Vec<Entry>> = spec.groups.iter().map(|g| entries(g, kernel::Paging::Paged)).collect();
     let declared = |group: u32, binding: u32| groups.get(group as usize)?.get(binding as usize);
     for (_, var) in module.global_variables.iter() {
         let Some(rb) = &var.binding else { continue };
@@ -556,8 +572,10 @@ fn check_entry_points(
         let uses = info.get_entry_point(index);
         for (handle, var) in module.global_variables.iter() {
             let Some(rb) = &var.binding else { continue };
-            let Some(b) =
-                spec.groups.get(rb.group as usize).and_then(|g| entries(g).into_iter().nth(rb.binding as usize))
+            let Some(b) = spec
+                .groups
+                .get(rb.group as usize)
+                .and_then(|g| entries(g, kernel::Paging::Paged).into_iter().nth(rb.binding as usize))
             else {
                 continue;
             };

@@ -110,7 +110,7 @@ fn paged_arrays(spec: &crate::gpu::bindings::KernelSpec, src: &str) -> String {
     use crate::gpu::bindings::entries;
     let mut out = String::new();
     for (g, group) in spec.groups.iter().enumerate() {
-        let all = entries(group);
+        let all = entries(group, Paging::Paged);
         for b in group.iter().filter(|b| b.pages > 1) {
             let name = b.name;
             let decl = format!("> {name}: array<");

@@ -401,6 +401,7 @@ impl FirstShotTable {
         &self,
         device: &wgpu::Device,
         layout: &wgpu::BindGroupLayout,
+        paging: crate::gpu::kernel::Paging,
         samples: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
         bindings::bind_group(
@@ -408,6 +409,7 @@ impl FirstShotTable {
             "firstshot.first_shot_table.bind_group",
             layout,
             FIRST_SHOT_TABLE_GROUP,
+            paging,
             &[
                 ("fs_offsets", (&self.offsets).into()),
                 ("fs_entries", (&self.entries).into()),

@@ -62,7 +62,7 @@ impl BundleReflect {
                     ("image_outgoing", image_outgoing.resource()),
                 ],
             ),
-            table_group: scene.first_shot.bind_group(device, &built.layouts[1], &scene.samples),
+            table_group: scene.first_shot.bind_group(device, &built.layouts[1], built.paging, &scene.samples),
             patch_count: scene.patch_count,
         }
     }
