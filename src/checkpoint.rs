@@ -3,17 +3,17 @@
 //! every patch, the image sum (its two halves) and the step count: step k's random numbers
 //! depend only on (seed, k), so no generator state needs saving.
 //!
-//! File layout (little endian): magic "FSCKPT02" (01: before the state's running means and
-//! the image sum's two halves), fingerprint u64, step u32, state length
+//! File layout (little endian): magic "FSCKPT03" (01: before the state's running means and
+//! the image sum's two halves; 02: before the state's glossy history), fingerprint u64, step u32, state length
 //! u64, image-sum length u64, the two byte arrays, then an FNV-1a 64 checksum of all that
 //! precedes it.
 
 use crate::{Error, Result};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"FSCKPT02";
-/// The first version's magic, refused with a word on why.
-const MAGIC_01: &[u8; 8] = b"FSCKPT01";
+const MAGIC: &[u8; 8] = b"FSCKPT03";
+/// Earlier versions' magics, refused with a word on why.
+const OLDER_MAGICS: [&[u8; 8]; 2] = [b"FSCKPT01", b"FSCKPT02"];
 
 /// The iteration state after `step` steps.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -60,7 +60,7 @@ impl Checkpoint {
     /// Parses a checkpoint; `path` only names it in errors.
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Checkpoint> {
         const HEADER: usize = 8 + 8 + 4 + 8 + 8;
-        if bytes.len() >= 8 && &bytes[..8] == MAGIC_01 {
+        if bytes.len() >= 8 && OLDER_MAGICS.iter().any(|m| &bytes[..8] == *m) {
             return Err(corrupt(
                 path,
                 "it was written by an older firstshot whose iteration state this one cannot continue",

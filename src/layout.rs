@@ -105,7 +105,7 @@ pub struct GpuLightSample {
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
 pub struct GpuPatchState {
-    /// rgb: J_j.
+    /// rgb: J_j; w: how many of `earlier` hold a step's J (at most `GLOSSY_HISTORY`).
     pub incoming: [f32; 4],
     /// xyz: win_j, the direction of travel of that light (unit); zero before step 1.
     pub direction: [f32; 4],
@@ -118,7 +118,16 @@ pub struct GpuPatchState {
     /// rgb: the sum of K_j over the image steps so far; w: their number. The image's senders
     /// reflect its mean diffusely (docs/ALGORITHM.md 6).
     pub diffuse_sum: [f32; 4],
+    /// The J_j of the `GLOSSY_HISTORY` steps before this one, newest first: xyz the bits of
+    /// J's rgb, w its direction win (octahedral, `pack2x16snorm`); `incoming`'s w counts
+    /// those written. With `incoming` they are the samples of win whose glossy reflections
+    /// the image's senders average (docs/ALGORITHM.md 6).
+    pub earlier: [[u32; 4]; GLOSSY_HISTORY],
 }
+
+/// Earlier steps' J_j kept per patch for the glossy reflection the image gathers
+/// (`GpuPatchState::earlier`; WGSL: `GLOSSY_HISTORY`).
+pub const GLOSSY_HISTORY: usize = 3;
 
 /// A pinhole camera with the sub-pixel position of this pass's sample. WGSL: `Camera`.
 #[repr(C)]
@@ -295,7 +304,7 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuPatch => "Patch" { v0, v1, v2, normal, emission, material, flags }),
         layout!(GpuMaterial => "Material" { diffuse, specular, kind }),
         layout!(GpuLightSample => "LightSample" { position, normal, strength, kind, cone_scale, cone_offset }),
-        layout!(GpuPatchState => "PatchState" { incoming, direction, diffuse, mean_radiance, diffuse_sum }),
+        layout!(GpuPatchState => "PatchState" { incoming, direction, diffuse, mean_radiance, diffuse_sum, earlier }),
         layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),
         layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count, mis, first_row }),
         layout!(GpuDirectLight => "DirectLight" { position, normal, strength, cone, kind, first_face, faces }),
@@ -324,6 +333,7 @@ pub fn wgsl_constants() -> String {
          const MATERIAL_PHONG: u32 = {MATERIAL_PHONG}u;\n\
          const PREFIX_SUM_WORKGROUP: u32 = {PREFIX_SUM_WORKGROUP}u;\n\
          const PREFIX_SUM_PER_THREAD: u32 = {PREFIX_SUM_PER_THREAD}u;\n\
+         const GLOSSY_HISTORY: u32 = {GLOSSY_HISTORY}u;\n\
          const PI: f32 = {pi:?};\n\
          const FIXED_POINT_SCALE: f32 = {scale:?};\n",
         pi = std::f32::consts::PI,

@@ -14,8 +14,9 @@ use serde::Serialize;
 
 /// GPU bytes per patch besides the paged arrays: the triangles (3 `RasterVertex`), the
 /// first-shot row starts (4), and the copy of the state kept to redo a batch of steps
-/// (`GpuPatchState`, 80).
-const OTHER_DEVICE_BYTES_PER_PATCH: u64 = 3 * size_of::<RasterVertex>() as u64 + 4 + 80;
+/// (`GpuPatchState`).
+const OTHER_DEVICE_BYTES_PER_PATCH: u64 =
+    3 * size_of::<RasterVertex>() as u64 + 4 + size_of::<crate::layout::GpuPatchState>() as u64;
 /// GPU bytes per patch while the first shot runs: its 64-bit sums (8), row counts (4), fill
 /// cursors (4) and prefix-sum scratch (4).
 const FIRST_SHOT_BYTES_PER_PATCH: u64 = 20;

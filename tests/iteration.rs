@@ -178,3 +178,67 @@ fn test04_fragment_overflow_is_detected_and_redone_exactly() {
     let bits = |i: &firstshot::image::Image| i.pixels.iter().flat_map(|p| p.map(f32::to_bits)).collect::<Vec<u32>>();
     assert_eq!(bits(&normal.image), bits(&tight.image), "redone steps must give exactly the image of a run with room");
 }
+
+/// Keeps the iteration state of a run's end (its final checkpoint).
+#[derive(Default)]
+struct FinalState(Option<Vec<u8>>);
+
+impl firstshot::render::Hooks for FinalState {
+    fn wants_final_checkpoint(&self) -> bool {
+        true
+    }
+    fn checkpoint(
+        &mut self,
+        checkpoint: firstshot::checkpoint::Checkpoint,
+        _images: &[firstshot::image::Image],
+    ) -> firstshot::Result<()> {
+        self.0 = Some(checkpoint.state);
+        Ok(())
+    }
+}
+
+/// The octahedral map back to a unit vector (two snorm16 in 32 bits), written apart from the
+/// WGSL's `octahedral_unpack`.
+fn unpack_octahedral(bits: u32) -> DVec3 {
+    let snorm = |h: u32| ((h as u16 as i16) as f64 / 32767.0).max(-1.0);
+    let (x, y) = (snorm(bits & 0xffff), snorm(bits >> 16));
+    let z = 1.0 - x.abs() - y.abs();
+    let (x, y) = if z < 0.0 { ((1.0 - y.abs()) * x.signum(), (1.0 - x.abs()) * y.signum()) } else { (x, y) };
+    DVec3::new(x, y, z).normalize()
+}
+
+#[test]
+fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
+    use firstshot::layout::{GLOSSY_HISTORY, GpuPatchState};
+    let Some(ctx) = gpu() else { return };
+    let (scene, patches) = furnace(0.6, 1.0);
+    // The state after n steps (no burn-in: every step is an image step); step k's numbers
+    // depend on (seed, k) alone, so the runs of 1..=6 steps pass through the same states.
+    let state_after = |n: u32| {
+        let mut o = options(&scene, n, 5);
+        o.burn_in = Some(0);
+        let mut hooks = FinalState::default();
+        firstshot::render::render_with(&ctx, &scene, &patches, &o, None, &mut hooks).unwrap();
+        bytemuck::pod_collect_to_vec::<u8, GpuPatchState>(&hooks.0.unwrap())
+    };
+    let states: Vec<Vec<GpuPatchState>> = (1..=6).map(state_after).collect();
+    for (n, state) in (1..=6).zip(&states) {
+        let written = (n - 1).min(GLOSSY_HISTORY as u32) as f32;
+        let bad: Vec<f32> = state.iter().map(|s| s.incoming[3]).filter(|&w| w != written).take(5).collect();
+        assert!(bad.is_empty(), "after {n} steps {written} earlier J are kept, not {bad:?}");
+    }
+    let last = &states[5];
+    let mut moved = 0;
+    for (j, s) in last.iter().enumerate() {
+        for (i, e) in s.earlier.iter().enumerate() {
+            // Newest first: entry i holds the J of the state i + 1 steps back.
+            let before = &states[4 - i][j];
+            assert_eq!(&e[..3], &before.incoming[..3].iter().map(|v| v.to_bits()).collect::<Vec<_>>()[..], "patch {j} entry {i}: J");
+            let d = DVec3::new(before.direction[0] as f64, before.direction[1] as f64, before.direction[2] as f64);
+            let err = (unpack_octahedral(e[3]) - d).length();
+            assert!(err < 2e-4, "patch {j} entry {i}: direction {d} comes back {err} off");
+            moved += (before.incoming[0] != 0.0) as usize;
+        }
+    }
+    assert!(moved > last.len(), "the furnace's patches receive light ({moved})");
+}

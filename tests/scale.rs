@@ -49,13 +49,13 @@ fn test01_paged_per_patch_arrays_give_the_same_bits() {
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let n = patches.patches.len() as u64;
     assert!(n > 100, "{n} patches");
-    // Pages of 12 bytes a patch and a little: the patch table and the state take 7-8 pages,
+    // Pages of 12 bytes a patch and a little: the patch table and the state take 8 and 11 pages,
     // the vec4 arrays and the transfer sums 2, so that every paged array has a page past the
     // first and the 8-page ones most of theirs.
     let page = 12 * n + 96;
     let pages = |a: firstshot::gpu::scene_buffers::PerPatch| n.div_ceil(a.patches_per_page(page));
     assert_eq!(pages(PATCH_TABLE), 8);
-    assert_eq!(pages(PATCH_STATE), 7);
+    assert_eq!(pages(PATCH_STATE), 11);
     assert_eq!(pages(OUTGOING), 2);
     assert_eq!(pages(TRANSFER_SUMS), 2);
     assert!(PAGED_ARRAYS.iter().all(|&a| pages(a) >= 2 && pages(a) <= a.pages as u64));

@@ -54,10 +54,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (bundle.image_step != 0u) {
         sum += vec4<f32>(diffuse, 1.0);
     }
+    // The last steps' J_j move down the history (the oldest drops out): the image's senders
+    // average the glossy reflections of these samples of win (docs/ALGORITHM.md 6).
+    var earlier = old.earlier;
+    var written = old.incoming.w;
+    if (bundle.use_state != 0u) {
+        earlier[2] = earlier[1];
+        earlier[1] = earlier[0];
+        earlier[0] = vec4<u32>(bitcast<vec3<u32>>(old.incoming.rgb), octahedral_pack(old.direction.xyz));
+        written = min(written + 1.0, f32(GLOSSY_HISTORY));
+    }
     state_set(j, PatchState(
-        vec4<f32>(incoming, 0.0),
+        vec4<f32>(incoming, written),
         vec4<f32>(-side * bundle.direction.xyz, 0.0),
         vec4<f32>(diffuse, 0.0),
         vec4<f32>(mean_radiance, 0.0),
-        sum));
+        sum,
+        earlier));
 }

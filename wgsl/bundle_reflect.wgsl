@@ -44,25 +44,52 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let c = patch_centre(p);
     o += first_shot_radiance(j, c, n, m, w_out);
     // What the image gathers from j: its diffuse reflection of the mean J of the image steps
-    // so far (a direction-free estimate with none of the chain's step-to-step noise), its
-    // glossy reflection of this step's J (the one sample of win it has).
+    // so far (a direction-free estimate with none of the chain's step-to-step noise), and
+    // the mean of the glossy reflections of the last steps' J (each an independent sample of
+    // win, drawn before this step's d, so their mean is as unbiased as one and spreads a
+    // spike of one step's J over as many gather directions: docs/ALGORITHM.md 6).
     var image_o = o;
     if (bundle.use_state != 0u) {
         let s = state_at(j);
-        let w_in = -s.direction.xyz;
-        var glossy = vec3<f32>(0.0);
-        if (dot(n, w_in) > 0.0 && dot(n, w_out) > 0.0) {
-            glossy = 2.0 * PI * s.incoming.rgb * brdf_glossy(m, n, w_in, w_out);
-        }
+        let glossy = glossy_reflection(m, n, s.incoming.rgb, -s.direction.xyz, w_out);
         o += 2.0 * m.diffuse.rgb * s.diffuse.rgb + glossy;
         var mean = s.diffuse.rgb;
         if (s.diffuse_sum.w > 0.0) {
             mean = s.diffuse_sum.rgb / s.diffuse_sum.w;
         }
-        image_o += 2.0 * m.diffuse.rgb * mean + glossy;
+        var image_glossy = glossy;
+        if (m.kind == MATERIAL_PHONG) {
+            // Unrolled: a CPU adapter runs a data-dependent loop many times slower.
+            let written = u32(s.incoming.w);
+            if (written > 0u) {
+                image_glossy += earlier_glossy(m, n, s.earlier[0], w_out);
+            }
+            if (written > 1u) {
+                image_glossy += earlier_glossy(m, n, s.earlier[1], w_out);
+            }
+            if (written > 2u) {
+                image_glossy += earlier_glossy(m, n, s.earlier[2], w_out);
+            }
+            image_glossy /= f32(1u + written);
+        }
+        image_o += 2.0 * m.diffuse.rgb * mean + image_glossy;
     }
     outgoing_set(j, vec4<f32>(o, side));
     image_outgoing_set(j, vec4<f32>(image_o, side));
     let largest = abs(o);
     atomicMax(&max_bits, bitcast<u32>(max(largest.r, max(largest.g, largest.b))));
+}
+
+// The glossy reflection toward w_out of radiance J arriving from w_in (unit, away from the
+// surface), one sample of a uniform hemisphere (density 1 / (2 pi)).
+fn glossy_reflection(m: Material, n: vec3<f32>, j: vec3<f32>, w_in: vec3<f32>, w_out: vec3<f32>) -> vec3<f32> {
+    if (dot(n, w_in) > 0.0 && dot(n, w_out) > 0.0) {
+        return 2.0 * PI * j * brdf_glossy(m, n, w_in, w_out);
+    }
+    return vec3<f32>(0.0);
+}
+
+// The same for an entry of the state's history (PatchState::earlier).
+fn earlier_glossy(m: Material, n: vec3<f32>, e: vec4<u32>, w_out: vec3<f32>) -> vec3<f32> {
+    return glossy_reflection(m, n, bitcast<vec3<f32>>(e.xyz), -octahedral_unpack(e.w), w_out);
 }

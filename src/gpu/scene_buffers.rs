@@ -33,9 +33,10 @@ impl PerPatch {
 
 /// The patch table (`GpuPatch`), read at random by patch id (image estimate, first shot).
 pub const PATCH_TABLE: PerPatch = PerPatch { what: "the patch table", bytes: size_of::<GpuPatch>() as u64, pages: 8 };
-/// The iteration state (`GpuPatchState`).
+/// The iteration state (`GpuPatchState`): 11 pages, as many patches as the patch table's 8
+/// (its 128 bytes a patch against the table's 96).
 pub const PATCH_STATE: PerPatch =
-    PerPatch { what: "the iteration state", bytes: size_of::<GpuPatchState>() as u64, pages: 8 };
+    PerPatch { what: "the iteration state", bytes: size_of::<GpuPatchState>() as u64, pages: 11 };
 /// O_j and what the image gathers (vec4 each), read at random by the transfer and the image.
 pub const OUTGOING: PerPatch = PerPatch { what: "the outgoing radiance", bytes: 16, pages: 2 };
 /// The transfer's signed 64-bit fixed-point sums (3 x 2 u32), added to at random.

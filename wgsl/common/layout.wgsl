@@ -37,11 +37,32 @@ struct LightSample {
 
 // Iteration state of a patch (Rust: GpuPatchState).
 struct PatchState {
-    incoming: vec4<f32>,  // rgb J_j
+    incoming: vec4<f32>,  // rgb J_j, w how many of `earlier` are written
     direction: vec4<f32>, // xyz win_j
     diffuse: vec4<f32>,   // rgb K_j = J_j - (|n_j . d| - 1/2) Lbar_j, reflected diffusely
     mean_radiance: vec4<f32>, // rgb Lbar_j, running estimate of the mean incoming radiance
     diffuse_sum: vec4<f32>, // rgb the sum of K_j over the image steps so far, w their number
+    // J_j of the GLOSSY_HISTORY steps before, newest first: xyz bits of J's rgb, w win
+    // (octahedral_pack); the image's senders average their glossy reflections.
+    earlier: array<vec4<u32>, GLOSSY_HISTORY>,
+}
+
+// A unit direction in 32 bits: its octahedral map, two snorm16 (about 1e-4 rad).
+fn octahedral_pack(v: vec3<f32>) -> u32 {
+    var p = v.xy / (abs(v.x) + abs(v.y) + abs(v.z));
+    if (v.z < 0.0) {
+        p = (1.0 - abs(p.yx)) * select(vec2<f32>(-1.0), vec2<f32>(1.0), p >= vec2<f32>(0.0));
+    }
+    return pack2x16snorm(p);
+}
+
+fn octahedral_unpack(bits: u32) -> vec3<f32> {
+    let p = unpack2x16snorm(bits);
+    var v = vec3<f32>(p, 1.0 - abs(p.x) - abs(p.y));
+    if (v.z < 0.0) {
+        v = vec3<f32>((1.0 - abs(v.yx)) * select(vec2<f32>(-1.0), vec2<f32>(1.0), v.xy >= vec2<f32>(0.0)), v.z);
+    }
+    return normalize(v);
 }
 
 // Pinhole camera with this pass's sub-pixel sample (Rust: GpuCamera).
