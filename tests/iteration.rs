@@ -213,7 +213,7 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
     let Some(ctx) = gpu() else { return };
     let (scene, patches) = furnace(0.6, 1.0);
     // The state after n steps (no burn-in: every step is an image step); step k's numbers
-    // depend on (seed, k) alone, so the runs of 1..=6 steps pass through the same states.
+    // depend on (seed, k) alone, so the runs of 1, 2, ... steps pass through the same states.
     let state_after = |n: u32| {
         let mut o = options(&scene, n, 5);
         o.burn_in = Some(0);
@@ -221,18 +221,19 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
         firstshot::render::render_with(&ctx, &scene, &patches, &o, None, &mut hooks).unwrap();
         bytemuck::pod_collect_to_vec::<u8, GpuPatchState>(&hooks.0.unwrap())
     };
-    let states: Vec<Vec<GpuPatchState>> = (1..=6).map(state_after).collect();
-    for (n, state) in (1..=6).zip(&states) {
+    let runs = GLOSSY_HISTORY as u32 + 1;
+    let states: Vec<Vec<GpuPatchState>> = (1..=runs).map(state_after).collect();
+    for (n, state) in (1..=runs).zip(&states) {
         let written = (n - 1).min(GLOSSY_HISTORY as u32) as f32;
         let bad: Vec<f32> = state.iter().map(|s| s.incoming[3]).filter(|&w| w != written).take(5).collect();
         assert!(bad.is_empty(), "after {n} steps {written} earlier J are kept, not {bad:?}");
     }
-    let last = &states[5];
+    let last = &states[GLOSSY_HISTORY];
     let mut moved = 0;
     for (j, s) in last.iter().enumerate() {
         for (i, e) in s.earlier.iter().enumerate() {
             // Newest first: entry i holds the J of the state i + 1 steps back.
-            let before = &states[4 - i][j];
+            let before = &states[GLOSSY_HISTORY - 1 - i][j];
             assert_eq!(&e[..3], &before.incoming[..3].iter().map(|v| v.to_bits()).collect::<Vec<_>>()[..], "patch {j} entry {i}: J");
             let d = DVec3::new(before.direction[0] as f64, before.direction[1] as f64, before.direction[2] as f64);
             let err = (unpack_octahedral(e[3]) - d).length();
@@ -241,4 +242,7 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
         }
     }
     assert!(moved > last.len(), "the furnace's patches receive light ({moved})");
+    // The reflection reads every entry: its unrolled sum has one term per entry.
+    let reflect = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/wgsl/bundle_reflect.wgsl")).unwrap();
+    assert_eq!(reflect.matches("earlier_glossy(m, n, state_at(j).earlier[").count(), GLOSSY_HISTORY, "bundle_reflect.wgsl");
 }

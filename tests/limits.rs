@@ -5,8 +5,8 @@
 mod common;
 
 use firstshot::Error;
-use firstshot::gpu::scene_buffers::{PAGED_ARRAYS, PATCH_TABLE};
-use firstshot::layout::{GpuPatch, RasterVertex};
+use firstshot::gpu::scene_buffers::{PAGED_ARRAYS, PATCH_STATE, PATCH_TABLE};
+use firstshot::layout::{GpuPatchState, RasterVertex};
 use firstshot::render::{RenderOptions, check_limits};
 use firstshot::scene::{self, Patches};
 
@@ -110,7 +110,7 @@ fn test03_the_per_patch_arrays_fit_their_pages_exactly_at_the_limit() {
 
 #[test]
 fn test04_hand_made_patches() {
-    // Two triangles: 2 patches x 96 bytes is the largest per-patch buffer.
+    // Two triangles: 2 patches x 128 bytes (the state) is the largest per-patch buffer.
     let t = |z: f64| [glam::DVec3::new(0.0, 0.0, z), glam::DVec3::new(1.0, 0.0, z), glam::DVec3::new(0.0, 1.0, z)];
     let patches = Patches {
         patches: [t(0.0), t(1.0)]
@@ -131,12 +131,14 @@ fn test04_hand_made_patches() {
         ..Default::default()
     };
     let options = RenderOptions { width: 2, height: 2, iterations: 0, ..cornell_box().1 };
-    // A page holds one patch at least: one patch's 96 bytes (and its 96 bytes of triangles)
-    // fit, a byte less holds no patch.
-    let patch = size_of::<GpuPatch>() as u64;
+    // A page holds one patch at least: the largest per-patch element (the state's 128 bytes;
+    // the patch table's 96 and the triangles' 96 are smaller) fits, a byte less holds none.
+    let patch = size_of::<GpuPatchState>() as u64;
+    assert_eq!(PAGED_ARRAYS.iter().map(|a| a.bytes).max(), Some(patch));
+    assert_eq!(PATCH_STATE.capacity(patch), PATCH_STATE.pages as u64);
     assert_eq!(PATCH_TABLE.capacity(patch), 8);
     check_limits(&buffers_of(patch), &patches, &options).expect("fits exactly");
-    refused(check_limits(&buffers_of(patch - 1), &patches, &options), &["the patch table", "--patch-size"]);
+    refused(check_limits(&buffers_of(patch - 1), &patches, &options), &["the iteration state", "--patch-size"]);
 }
 
 #[test]

@@ -55,20 +55,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         sum += vec4<f32>(diffuse, 1.0);
     }
     // The last steps' J_j move down the history (the oldest drops out): the image's senders
-    // average the glossy reflections of these samples of win (docs/ALGORITHM.md 6).
-    var earlier = old.earlier;
-    var written = old.incoming.w;
-    if (bundle.use_state != 0u) {
-        earlier[2] = earlier[1];
-        earlier[1] = earlier[0];
-        earlier[0] = vec4<u32>(bitcast<vec3<u32>>(old.incoming.rgb), octahedral_pack(old.direction.xyz));
-        written = min(written + 1.0, f32(GLOSSY_HISTORY));
-    }
+    // average the glossy reflections of these samples of win (docs/ALGORITHM.md 6). Written
+    // out, for GLOSSY_HISTORY entries, with no local array (a CPU adapter may keep one in
+    // scratch memory). Step 0's entry (the zero state) is shifted in too but never counted.
+    let newest = vec4<u32>(bitcast<vec3<u32>>(old.incoming.rgb), octahedral_pack(old.direction.xyz));
+    let written = select(old.incoming.w, min(old.incoming.w + 1.0, f32(GLOSSY_HISTORY)), bundle.use_state != 0u);
     state_set(j, PatchState(
         vec4<f32>(incoming, written),
         vec4<f32>(-side * bundle.direction.xyz, 0.0),
         vec4<f32>(diffuse, 0.0),
         vec4<f32>(mean_radiance, 0.0),
         sum,
-        earlier));
+        array<vec4<u32>, GLOSSY_HISTORY>(newest, old.earlier[0], old.earlier[1])));
 }

@@ -49,7 +49,7 @@ struct PatchState {
 
 // A unit direction in 32 bits: its octahedral map, two snorm16 (about 1e-4 rad).
 fn octahedral_pack(v: vec3<f32>) -> u32 {
-    var p = v.xy / (abs(v.x) + abs(v.y) + abs(v.z));
+    var p = v.xy / max(abs(v.x) + abs(v.y) + abs(v.z), 1e-30);
     if (v.z < 0.0) {
         p = (1.0 - abs(p.yx)) * select(vec2<f32>(-1.0), vec2<f32>(1.0), p >= vec2<f32>(0.0));
     }
