@@ -641,10 +641,10 @@ mod tests {
     #[test]
     fn missing_and_extra_bindings_are_reported() {
         // The pages of paged bindings follow the whole list: without `state`, its last page
-        // (binding 21 of the WGSL) is beyond the spec; with one more binding, the spec's
+        // (binding 24 of the WGSL) is beyond the spec; with one more binding, the spec's
         // last page moves past the WGSL's.
-        assert_reported(&errors_of(|_, g, _| _ = g.pop()), "`state_7` is in the WGSL but not in the spec");
-        assert_reported(&errors_of(|_, g, _| g.push(read::<u32>("extra"))), "binding 22 `state_7`, the WGSL does not");
+        assert_reported(&errors_of(|_, g, _| _ = g.pop()), "`state_10` is in the WGSL but not in the spec");
+        assert_reported(&errors_of(|_, g, _| g.push(read::<u32>("extra"))), "binding 25 `state_10`, the WGSL does not");
         assert_reported(&errors_of(|_, g, _| g[5] = g[5].paged(2)), "`state_2` is in the WGSL but not in the spec");
     }
 
