@@ -105,9 +105,11 @@ pub struct DirectLights {
     kept: WindowAtlas,
     per_pass: WindowAtlas,
     window: LightWindow,
-    /// Pixels along a full face edge, after the memory budget (a sun's view: `SUN_VIEW_SCALE`
-    /// times as many).
+    /// Pixels along the edge of the largest face of a point's window, after the memory budget
+    /// (a sun's view: `SUN_VIEW_SCALE` times as many).
     pub resolution: u32,
+    /// Pixels along each face's edge, as `faces`.
+    sides: Vec<u32>,
     /// The pass whose points the tables hold.
     prepared: Option<u64>,
     near: f64,
@@ -179,6 +181,52 @@ pub fn auto_resolution(scene: &Scene, patches: &Patches, floor: u32) -> u32 {
     floor.max(wanted.div_ceil(16) * 16)
 }
 
+/// The side `auto_resolution`'s rule asks of each face of a window at `y` whose faces look
+/// along `forwards` (one face per forward, as `first_shot::faces` orders them), from the
+/// patches that face sees: each patch counts for the face whose forward is nearest its
+/// direction from y (the face `visible` in `wgsl/image_estimate.wgsl` looks it up in), and
+/// for an area light only the patches in front of it (`lit`, its normal). A face that sees
+/// only large or distant patches (a hemicube's side faces on the walls, with the small
+/// patches of an object below the light in its top face) then gets the fewer texels it
+/// needs, and a window costs its texels (the Sierpinski scene's area-light window: 2048 on
+/// top, 512 on the sides, a third of the texels). At least `floor`, at most
+/// `AUTO_RESOLUTION_MAX`; a face that sees no patch gets `floor`.
+pub fn auto_face_sides(y: DVec3, forwards: &[DVec3], lit: Option<DVec3>, patches: &Patches, floor: u32) -> Vec<u32> {
+    let mut q: Vec<Vec<f64>> = vec![Vec::new(); forwards.len()];
+    let stride = patches.patches.len().div_ceil(MEDIAN_SAMPLE).max(1);
+    for p in patches.patches.iter().step_by(stride).filter(|p| p.area > 0.0) {
+        let w = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - y;
+        if lit.is_some_and(|n| n.dot(w) <= 0.0) {
+            continue;
+        }
+        let nearest = (0..forwards.len()).max_by(|&a, &b| forwards[a].dot(w).total_cmp(&forwards[b].dot(w)));
+        if let Some(f) = nearest {
+            q[f].push(w.length() / p.area.sqrt());
+        }
+    }
+    q.into_iter()
+        .map(|mut q| {
+            if q.is_empty() {
+                return floor;
+            }
+            let middle = q.len() / 2;
+            let (_, median, _) = q.select_nth_unstable_by(middle, f64::total_cmp);
+            let wanted = (2.0 * TEXELS_PER_PATCH * *median).ceil().min(AUTO_RESOLUTION_MAX as f64) as u32;
+            floor.max(wanted.div_ceil(16) * 16)
+        })
+        .collect()
+}
+
+/// The faces of the window around `sample`, face k at `sides[k]` pixels per edge (the
+/// orientation of each face does not depend on its side).
+fn faces_at(sample: &LightSample, window: LightWindow, sides: &[u32], near: f64, bounds: (DVec3, f64)) -> Vec<first_shot::Face> {
+    sides
+        .iter()
+        .enumerate()
+        .map(|(k, &side)| first_shot::faces(sample, window, side, near, bounds).0.swap_remove(k))
+        .collect()
+}
+
 /// Places tiles of (side, rows) texels on shelves at most `width` wide; returns their
 /// top-left corners and the atlas size.
 fn pack(tiles: &[(u32, u32)], width: u32) -> (Vec<[u32; 2]>, [u32; 2]) {
@@ -205,6 +253,15 @@ fn point_in_triangle([a, b, c]: [DVec3; 3], u1: f64, u2: f64) -> DVec3 {
 /// A sample at `position` whose window is the source's: a cube for a point or spot light, a
 /// window above `normal` (the normal of the triangle the point lies on) for an area source,
 /// a parallel view for a directional light.
+/// The normal a source's window is turned to: an area light's (its first triangle's), else
+/// none.
+fn source_normal(source: &Source) -> DVec3 {
+    match source {
+        Source::Area { triangles, .. } => triangles[0].1,
+        _ => DVec3::ZERO,
+    }
+}
+
 fn window_sample(source: &Source, position: DVec3, normal: DVec3) -> LightSample {
     let kind = match *source {
         Source::Point { .. } | Source::Spot { .. } => SampleKind::Point,
@@ -269,33 +326,56 @@ impl DirectLights {
         let near = buffers.radius * 1e-6;
         let bounds = (buffers.centre, buffers.radius);
         let max_side = ctx.limits().max_texture_dimension_2d;
-        // The face layout at a resolution: (source index, face, atlas) for every face.
-        let layout = |r: u32| -> Vec<(usize, first_shot::Face, u32)> {
+        // The side each face asks for: `--shadow-resolution` for all, else the automatic rule
+        // per face where a window keeps its orientation (point and spot lights, an area light:
+        // `auto_face_sides`), the whole scene's rule for the rest (an emitting shape's window
+        // turns with its triangles; a sun's one view gets SUN_VIEW_SCALE times it below).
+        let wanted: Vec<Vec<u32>> = sources
+            .iter()
+            .map(|(source, position)| {
+                let sample = window_sample(source, *position, source_normal(source));
+                let forwards: Vec<DVec3> =
+                    first_shot::faces(&sample, window, 16, near, bounds).0.iter().map(|f| f.view.forward).collect();
+                let per_face = match source {
+                    _ if options.shadow_resolution.is_some() => None,
+                    Source::Point { .. } | Source::Spot { .. } => Some(None),
+                    Source::Area { shared: false, triangles, .. } => Some(Some(triangles[0].1)),
+                    Source::Area { shared: true, .. } | Source::Directional { .. } => None,
+                };
+                match per_face {
+                    Some(lit) => auto_face_sides(*position, &forwards, lit, patches, options.hemicube_resolution),
+                    None => vec![resolution; forwards.len()],
+                }
+            })
+            .collect();
+        // The face layout with every side halved `halvings` times: (source index, face,
+        // atlas, side) for every face.
+        let layout = |halvings: u32| -> Vec<(usize, first_shot::Face, u32, u32)> {
             sources
                 .iter()
+                .zip(&wanted)
                 .enumerate()
-                .flat_map(|(i, (source, position))| {
+                .flat_map(|(i, ((source, position), wanted))| {
                     let atlas = if matches!(source, Source::Area { .. }) { PER_PASS } else { KEPT };
-                    let normal = match source {
-                        Source::Area { triangles, .. } => triangles[0].1,
-                        _ => DVec3::ZERO,
-                    };
                     // A sun's one view spans the whole scene where a cube face spans a quarter
                     // of a point's surroundings: it gets SUN_VIEW_SCALE times the side.
-                    let side = match source {
-                        Source::Directional { .. } => (SUN_VIEW_SCALE * r).min(max_side),
-                        _ => r,
-                    };
-                    first_shot::faces(&window_sample(source, *position, normal), window, side, near, bounds)
-                        .0
+                    let scale = if matches!(source, Source::Directional { .. }) { SUN_VIEW_SCALE } else { 1 };
+                    let sides: Vec<u32> = wanted
+                        .iter()
+                        .map(|&w| ((w >> halvings).clamp(MIN_SHADOW_RESOLUTION, max_side) * scale).min(max_side))
+                        .collect();
+                    let sample = window_sample(source, *position, source_normal(source));
+                    faces_at(&sample, window, &sides, near, bounds)
                         .into_iter()
-                        .map(move |f| (i, f, atlas))
+                        .zip(sides)
+                        .map(move |(f, side)| (i, f, atlas, side))
+                        .collect::<Vec<_>>()
                 })
                 .collect()
         };
-        let mut r = resolution.clamp(MIN_SHADOW_RESOLUTION, max_side);
+        let mut halvings = 0;
         let (faces, corners, sizes) = loop {
-            let faces = layout(r);
+            let faces = layout(halvings);
             let tiles = |atlas: u32| -> Vec<(u32, u32)> {
                 faces.iter().filter(|f| f.2 == atlas).map(|f| (f.1.view.size[0], f.1.rows)).collect()
             };
@@ -305,14 +385,22 @@ impl DirectLights {
             let fits = kept_size[1] <= max_side
                 && pass_size[1] <= max_side
                 && texels(kept_size) + texels(pass_size) <= SHADOW_TEXEL_BUDGET;
-            if fits || r <= MIN_SHADOW_RESOLUTION {
+            let smallest = faces.iter().all(|f| f.3 <= MIN_SHADOW_RESOLUTION);
+            if fits || smallest {
                 break (faces, [kept_corners, pass_corners], [kept_size, pass_size]);
             }
-            r = (r / 2).max(MIN_SHADOW_RESOLUTION);
+            halvings += 1;
         };
+        // The largest side of a point's window (a sun's view is SUN_VIEW_SCALE times it).
+        let r = faces
+            .iter()
+            .map(|f| if matches!(sources[f.0].0, Source::Directional { .. }) { f.3 / SUN_VIEW_SCALE } else { f.3 })
+            .max()
+            .unwrap_or((resolution >> halvings).clamp(MIN_SHADOW_RESOLUTION, max_side));
+        let sides: Vec<u32> = faces.iter().map(|f| f.3).collect();
         let mut next = [0usize; 2];
         let mut table_faces = Vec::with_capacity(faces.len());
-        for (_, face, atlas) in &faces {
+        for (_, face, atlas, _) in &faces {
             let [x, y] = corners[*atlas as usize][next[*atlas as usize]];
             next[*atlas as usize] += 1;
             table_faces.push(GpuWindowFace { view: face.view.gpu([0.5, 0.5]), tile: [x, y, face.rows, *atlas] });
@@ -368,6 +456,7 @@ impl DirectLights {
             per_pass,
             window,
             resolution: r,
+            sides,
             prepared: None,
             near,
             bounds,
@@ -436,9 +525,8 @@ impl DirectLights {
             let pick_area = if *shared { weight } else { 0.0 };
             entry.normal = [normal.x as f32, normal.y as f32, normal.z as f32, pick_area];
             entry.strength = [radiance[0] * weight, radiance[1] * weight, radiance[2] * weight, 0.0];
-            let r = self.resolution;
-            let (faces, _) =
-                first_shot::faces(&window_sample(&planned.source, y, normal), self.window, r, self.near, self.bounds);
+            let sides = &self.sides[planned.faces.clone()];
+            let faces = faces_at(&window_sample(&planned.source, y, normal), self.window, sides, self.near, self.bounds);
             for (slot, face) in self.faces[planned.faces.clone()].iter_mut().zip(faces) {
                 slot.view = face.view.gpu([0.5, 0.5]);
             }

@@ -443,3 +443,35 @@ fn test08_a_finely_tessellated_occluder_does_not_leak_light() {
     assert!(before * 10 > umbra.len(), "at the hemicube resolution the leak should show: {before} of {}", umbra.len());
     assert!(after * 50 <= umbra.len(), "the automatic resolution leaks in {after} of {} umbra pixels", umbra.len());
 }
+
+#[test]
+fn test09_each_window_face_gets_the_side_its_own_patches_need() {
+    // A light at the origin with small patches below it (area 1e-4 at distance 1: q = 100,
+    // 2 x 8 x 100 = 1600 texels) and large ones beside it (area 0.5 at distance 3: q about 4,
+    // below the floor). Only the face looking down needs many texels; the face looking at the
+    // large patches, and the faces that see nothing, keep the floor.
+    use firstshot::direct_light::{AUTO_RESOLUTION_MAX, TEXELS_PER_PATCH, auto_face_sides};
+    let mut tris = Vec::new();
+    for i in 0..40 {
+        let c = DVec3::new(-0.3 + 0.015 * i as f64, -1.0, 0.1);
+        let s = (2.0e-4f64).sqrt();
+        tris.push([c, c + DVec3::new(s, 0.0, 0.0), c + DVec3::new(0.0, 0.0, s)]);
+    }
+    for i in 0..9 {
+        let c = DVec3::new(3.0, -1.5 + 0.3 * i as f64, -0.5);
+        tris.push([c, c + DVec3::new(0.0, 1.0, 0.0), c + DVec3::new(0.0, 0.0, 1.0)]);
+    }
+    let patches = common::patches_of(&tris, vec![]);
+    let cube = [DVec3::X, -DVec3::X, DVec3::Y, -DVec3::Y, DVec3::Z, -DVec3::Z];
+    let floor = 128;
+    let sides = auto_face_sides(DVec3::ZERO, &cube, None, &patches, floor);
+    let q = 1.0 / 1.0e-4f64.sqrt();
+    let expected = ((2.0 * TEXELS_PER_PATCH * q).ceil() as u32).div_ceil(16) * 16;
+    assert!(expected > floor && expected < AUTO_RESOLUTION_MAX);
+    // q of the small patches varies by a few percent with their offsets: the median's side.
+    assert!((sides[3] as f64 - expected as f64).abs() <= 0.05 * expected as f64, "down: {} against {expected}", sides[3]);
+    assert_eq!([sides[0], sides[1], sides[2], sides[4], sides[5]], [floor; 5], "{sides:?}");
+    // An area light facing up sees none of the small patches below its plane.
+    let lit = auto_face_sides(DVec3::ZERO, &cube, Some(DVec3::Y), &patches, floor);
+    assert_eq!(lit, vec![floor; 6]);
+}
