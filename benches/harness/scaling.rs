@@ -339,8 +339,11 @@ fn process_row(
 /// The large series, whole processes: the Sierpinski scene at `config.patch_sizes` and the
 /// Cornell box at `config.images`, smallest first (a failure, e.g. out of memory, is a
 /// row of its own).
+/// One whole-process run of the large series: (study, scene, --patch-size, image size).
+type PlannedRun<'a> = (&'static str, &'a str, Option<f64>, (u32, u32));
+
 fn process_rows(config: &Config, slot: &Slot) -> Vec<ProcessRow> {
-    let mut plan: Vec<(&'static str, &str, Option<f64>, (u32, u32))> =
+    let mut plan: Vec<PlannedRun> =
         config.patch_sizes.iter().map(|&p| ("patch_size", "sierpinski", Some(p), (128, 128))).collect();
     plan.extend(config.images.iter().map(|&s| ("image", "cornell_box", None, s)));
     plan.into_iter()
