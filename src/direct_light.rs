@@ -170,14 +170,26 @@ pub fn auto_resolution(scene: &Scene, patches: &Patches, floor: u32) -> u32 {
             let centre = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0;
             (y - centre).length() / p.area.sqrt()
         }));
-        if q.is_empty() {
-            continue;
+        if let Some(median) = median(&mut q) {
+            worst = worst.max(median);
         }
-        let middle = q.len() / 2;
-        let (_, median, _) = q.select_nth_unstable_by(middle, f64::total_cmp);
-        worst = worst.max(*median);
     }
-    let wanted = (2.0 * TEXELS_PER_PATCH * worst).ceil().min(AUTO_RESOLUTION_MAX as f64) as u32;
+    side_for(worst, floor)
+}
+
+/// The median of `q` (reordered), none if it is empty.
+fn median(q: &mut [f64]) -> Option<f64> {
+    if q.is_empty() {
+        return None;
+    }
+    let middle = q.len() / 2;
+    Some(*q.select_nth_unstable_by(middle, f64::total_cmp).1)
+}
+
+/// The face side that makes a patch of median q `TEXELS_PER_PATCH` texels across: a
+/// multiple of 16, at least `floor`, at most `AUTO_RESOLUTION_MAX` unless `floor` is more.
+fn side_for(median_q: f64, floor: u32) -> u32 {
+    let wanted = (2.0 * TEXELS_PER_PATCH * median_q).ceil().min(AUTO_RESOLUTION_MAX as f64) as u32;
     floor.max(wanted.div_ceil(16) * 16)
 }
 
@@ -204,22 +216,18 @@ pub fn auto_face_sides(y: DVec3, forwards: &[DVec3], lit: Option<DVec3>, patches
             q[f].push(w.length() / p.area.sqrt());
         }
     }
-    q.into_iter()
-        .map(|mut q| {
-            if q.is_empty() {
-                return floor;
-            }
-            let middle = q.len() / 2;
-            let (_, median, _) = q.select_nth_unstable_by(middle, f64::total_cmp);
-            let wanted = (2.0 * TEXELS_PER_PATCH * *median).ceil().min(AUTO_RESOLUTION_MAX as f64) as u32;
-            floor.max(wanted.div_ceil(16) * 16)
-        })
-        .collect()
+    q.into_iter().map(|mut q| median(&mut q).map_or(floor, |m| side_for(m, floor))).collect()
 }
 
 /// The faces of the window around `sample`, face k at `sides[k]` pixels per edge (the
 /// orientation of each face does not depend on its side).
-fn faces_at(sample: &LightSample, window: LightWindow, sides: &[u32], near: f64, bounds: (DVec3, f64)) -> Vec<first_shot::Face> {
+fn faces_at(
+    sample: &LightSample,
+    window: LightWindow,
+    sides: &[u32],
+    near: f64,
+    bounds: (DVec3, f64),
+) -> Vec<first_shot::Face> {
     sides
         .iter()
         .enumerate()
@@ -526,7 +534,8 @@ impl DirectLights {
             entry.normal = [normal.x as f32, normal.y as f32, normal.z as f32, pick_area];
             entry.strength = [radiance[0] * weight, radiance[1] * weight, radiance[2] * weight, 0.0];
             let sides = &self.sides[planned.faces.clone()];
-            let faces = faces_at(&window_sample(&planned.source, y, normal), self.window, sides, self.near, self.bounds);
+            let faces =
+                faces_at(&window_sample(&planned.source, y, normal), self.window, sides, self.near, self.bounds);
             for (slot, face) in self.faces[planned.faces.clone()].iter_mut().zip(faces) {
                 slot.view = face.view.gpu([0.5, 0.5]);
             }

@@ -234,7 +234,11 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
         for (i, e) in s.earlier.iter().enumerate() {
             // Newest first: entry i holds the J of the state i + 1 steps back.
             let before = &states[GLOSSY_HISTORY - 1 - i][j];
-            assert_eq!(&e[..3], &before.incoming[..3].iter().map(|v| v.to_bits()).collect::<Vec<_>>()[..], "patch {j} entry {i}: J");
+            assert_eq!(
+                &e[..3],
+                &before.incoming[..3].iter().map(|v| v.to_bits()).collect::<Vec<_>>()[..],
+                "patch {j} entry {i}: J"
+            );
             let d = DVec3::new(before.direction[0] as f64, before.direction[1] as f64, before.direction[2] as f64);
             let err = (unpack_octahedral(e[3]) - d).length();
             assert!(err < 2e-4, "patch {j} entry {i}: direction {d} comes back {err} off");
@@ -244,5 +248,5 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
     assert!(moved > last.len(), "the furnace's patches receive light ({moved})");
     // The reflection reads every entry: its unrolled sum has one term per entry.
     let reflect = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/wgsl/bundle_reflect.wgsl")).unwrap();
-    assert_eq!(reflect.matches("earlier_glossy(m, n, state_at(j).earlier[").count(), GLOSSY_HISTORY, "bundle_reflect.wgsl");
+    assert_eq!(reflect.matches("earlier_glossy(m, n, s.earlier[").count(), GLOSSY_HISTORY, "bundle_reflect.wgsl");
 }

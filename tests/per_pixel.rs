@@ -469,7 +469,11 @@ fn test09_each_window_face_gets_the_side_its_own_patches_need() {
     let expected = ((2.0 * TEXELS_PER_PATCH * q).ceil() as u32).div_ceil(16) * 16;
     assert!(expected > floor && expected < AUTO_RESOLUTION_MAX);
     // q of the small patches varies by a few percent with their offsets: the median's side.
-    assert!((sides[3] as f64 - expected as f64).abs() <= 0.05 * expected as f64, "down: {} against {expected}", sides[3]);
+    assert!(
+        (sides[3] as f64 - expected as f64).abs() <= 0.05 * expected as f64,
+        "down: {} against {expected}",
+        sides[3]
+    );
     assert_eq!([sides[0], sides[1], sides[2], sides[4], sides[5]], [floor; 5], "{sides:?}");
     // An area light facing up sees none of the small patches below its plane.
     let lit = auto_face_sides(DVec3::ZERO, &cube, Some(DVec3::Y), &patches, floor);

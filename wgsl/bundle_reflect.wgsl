@@ -59,17 +59,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         }
         var image_glossy = glossy;
         if (m.kind == MATERIAL_PHONG) {
-            // Unrolled, for GLOSSY_HISTORY entries, each read on its own: a CPU adapter runs a
-            // data-dependent loop, or one over a local array, many times slower.
+            // Unrolled, for GLOSSY_HISTORY entries: a CPU adapter runs a data-dependent loop
+            // many times slower.
             let written = u32(s.incoming.w);
             if (written > 0u) {
-                image_glossy += earlier_glossy(m, n, state_at(j).earlier[0], w_out);
+                image_glossy += earlier_glossy(m, n, s.earlier[0], w_out);
             }
             if (written > 1u) {
-                image_glossy += earlier_glossy(m, n, state_at(j).earlier[1], w_out);
+                image_glossy += earlier_glossy(m, n, s.earlier[1], w_out);
             }
             if (written > 2u) {
-                image_glossy += earlier_glossy(m, n, state_at(j).earlier[2], w_out);
+                image_glossy += earlier_glossy(m, n, s.earlier[2], w_out);
             }
             image_glossy /= f32(1u + written);
         }

@@ -336,12 +336,12 @@ fn process_row(
     })
 }
 
-/// The large series, whole processes: the Sierpinski scene at `config.patch_sizes` and the
-/// Cornell box at `config.images`, smallest first (a failure, e.g. out of memory, is a
-/// row of its own).
 /// One whole-process run of the large series: (study, scene, --patch-size, image size).
 type PlannedRun<'a> = (&'static str, &'a str, Option<f64>, (u32, u32));
 
+/// The large series, whole processes: the Sierpinski scene at `config.patch_sizes` and the
+/// Cornell box at `config.images`, smallest first (a failure, e.g. out of memory, is a
+/// row of its own).
 fn process_rows(config: &Config, slot: &Slot) -> Vec<ProcessRow> {
     let mut plan: Vec<PlannedRun> =
         config.patch_sizes.iter().map(|&p| ("patch_size", "sierpinski", Some(p), (128, 128))).collect();
