@@ -75,6 +75,88 @@ pub fn bundle_of_step(
 /// scene's bounding sphere (the r - 2 of `fragment_bound`).
 pub const MIN_BUNDLE_RESOLUTION: u32 = 4;
 
+/// The bundle resolutions the automatic choice (`auto_bundle_resolution`) takes by itself;
+/// `--bundle-resolution` may ask for others.
+pub const AUTO_BUNDLE_MIN: u32 = 64;
+pub const AUTO_BUNDLE_MAX: u32 = 1024;
+/// How many pixel footprints wide a line may be at the median distance a view sees
+/// (`auto_bundle_resolution`).
+pub const AUTO_BUNDLE_LINE_PIXELS: f64 = 1.5;
+/// Patches sampled for the medians of the automatic choice (every k-th patch beyond it).
+const AUTO_BUNDLE_SAMPLE: usize = 1 << 16;
+
+/// The bundle resolution when neither the scene nor the command line sets one: the finer of
+/// what the patches and what the images need, rounded up to a multiple of 64 within
+/// [`AUTO_BUNDLE_MIN`, `AUTO_BUNDLE_MAX`]. `radius` is the bounding sphere's (the grid
+/// covers its diameter, so a line is 2 radius / r wide).
+///
+/// - The patches: a patch of area A is crossed by A |cos| / dP lines of a step, A / (2 dP) on
+///   average over directions. Its J_j is the mean of those lines' radiance weighted by the
+///   area they stand for, so a patch crossed by fewer than one line has a J_j that is zero
+///   on most steps and a multiple of its true value on the others: the spikes the image's
+///   gather then reflects. The rule gives the patch of median area one line per step on
+///   average: r >= 2 radius sqrt(2 / A_median).
+/// - The images: the gather reads the line through a pixel's surface point, so the
+///   sender it finds is the surface x's own ray hits only where that surface has a fragment
+///   on the line; elsewhere (near edges and small patches) the indirect light is blurred
+///   over about a line's width. The rule makes a line at most `AUTO_BUNDLE_LINE_PIXELS`
+///   pixel footprints wide at the median distance of the surfaces a view sees (each patch
+///   in the view's frustum weighted by the solid angle it fills, occlusion ignored), for
+///   the view that needs it finest.
+///
+/// The cost of a step grows with r^2 (the fragments), so neither is asked more of. The two
+/// constants (one line per median patch, 1.5 pixels) are where the error per second of the
+/// bundled scenes peaked at 256 x 256 and 512 x 512 (docs/PERFORMANCE.md, "Bundle
+/// resolution").
+pub fn auto_bundle_resolution(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> u32 {
+    let stride = patches.patches.len().div_ceil(AUTO_BUNDLE_SAMPLE).max(1);
+    let sampled = || patches.patches.iter().step_by(stride).filter(|p| p.area > 0.0);
+    let mut areas: Vec<f64> = sampled().map(|p| p.area).collect();
+    let mut wanted = 0.0_f64;
+    if !areas.is_empty() {
+        let middle = areas.len() / 2;
+        let median = *areas.select_nth_unstable_by(middle, f64::total_cmp).1;
+        wanted = 2.0 * radius * (2.0 / median).sqrt();
+    }
+    for view in views {
+        let c = &view.camera;
+        let forward = (c.look_at - c.position).normalize_or_zero();
+        let right = forward.cross(c.up).normalize_or_zero();
+        let up = right.cross(forward);
+        let tan_y = (0.5 * c.fov_y.to_radians()).tan();
+        let tan_x = tan_y * c.width as f64 / c.height.max(1) as f64;
+        // (distance, solid angle) of each patch centre in the frustum.
+        let mut seen: Vec<(f64, f64)> = sampled()
+            .filter_map(|p| {
+                let v = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - c.position;
+                let z = v.dot(forward);
+                if z <= 0.0 || v.dot(right).abs() > tan_x * z || v.dot(up).abs() > tan_y * z {
+                    return None;
+                }
+                let d2 = v.length_squared();
+                let solid_angle = p.area * p.normal.dot(v).abs() / (d2 * d2.sqrt());
+                (solid_angle > 0.0).then(|| (d2.sqrt(), solid_angle))
+            })
+            .collect();
+        if seen.is_empty() || c.height == 0 {
+            continue;
+        }
+        seen.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let half: f64 = 0.5 * seen.iter().map(|s| s.1).sum::<f64>();
+        let mut acc = 0.0;
+        let distance = seen.iter().find(|s| {
+            acc += s.1;
+            acc >= half
+        });
+        if let Some(&(distance, _)) = distance {
+            let footprint = AUTO_BUNDLE_LINE_PIXELS * distance * 2.0 * tan_y / c.height as f64;
+            wanted = wanted.max(2.0 * radius / footprint);
+        }
+    }
+    let r = (wanted.min(AUTO_BUNDLE_MAX as f64).ceil() as u32).div_ceil(64) * 64;
+    r.clamp(AUTO_BUNDLE_MIN, AUTO_BUNDLE_MAX)
+}
+
 /// Bytes of the largest per-line buffers of a step (counts and offsets: a u32 per line of
 /// the projection, and the total).
 pub fn line_table_bytes(resolution: u32) -> u64 {

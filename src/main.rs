@@ -87,9 +87,10 @@ pub(crate) struct RenderArgs {
     /// first shot (refused with point, spot or directional lights).
     #[arg(long)]
     no_first_shot: bool,
-    /// Pixels along an edge of each parallel projection of the iteration.
-    #[arg(long, value_name = "R")]
-    bundle_resolution: Option<u32>,
+    /// Pixels along an edge of each parallel projection of the iteration, or "auto": from
+    /// the patch sizes and the image (the default unless the scene's [settings] set one).
+    #[arg(long, value_name = "R|auto", value_parser = parse_bundle_resolution)]
+    bundle_resolution: Option<BundleResolution>,
     /// Random seed; the same seed, scene and flags give the same image.
     #[arg(long, value_name = "N")]
     seed: Option<u64>,
@@ -423,7 +424,7 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
         ("--width", args.width),
         ("--height", args.height),
         ("--hemicube-resolution", args.hemicube_resolution),
-        ("--bundle-resolution", args.bundle_resolution),
+        ("--bundle-resolution", args.bundle_resolution.and_then(|r| r.0)),
         ("--shadow-resolution", args.shadow_resolution),
     ] {
         if let Some(v) = v
@@ -435,7 +436,9 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     options.width = args.width.unwrap_or(options.width);
     options.height = args.height.unwrap_or(options.height);
     options.hemicube_resolution = args.hemicube_resolution.unwrap_or(options.hemicube_resolution);
-    options.bundle_resolution = args.bundle_resolution.unwrap_or(options.bundle_resolution);
+    if let Some(r) = args.bundle_resolution {
+        options.bundle_resolution = r.0;
+    }
     options.shadow_resolution = args.shadow_resolution;
     if let Some(v) = args.direct_passes {
         if !(1..=MAX_DIRECT_PASSES).contains(&v) {
@@ -707,7 +710,7 @@ impl Job<'_> {
                 stats.iterations,
                 stats.iteration_ms_median,
                 1e3 / stats.iteration_ms_median.max(1e-9),
-                r = options.bundle_resolution
+                r = stats.bundle_resolution
             ));
         }
         let written: Vec<String> =
@@ -740,5 +743,19 @@ impl Job<'_> {
             return Err(interrupted(self.stop, when));
         }
         Ok(())
+    }
+}
+
+/// `--bundle-resolution`: a number of pixels, or "auto" (`None`).
+#[derive(Debug, Clone, Copy)]
+struct BundleResolution(Option<u32>);
+
+fn parse_bundle_resolution(value: &str) -> std::result::Result<BundleResolution, String> {
+    match value {
+        "auto" => Ok(BundleResolution(None)),
+        _ => value
+            .parse()
+            .map(|r| BundleResolution(Some(r)))
+            .map_err(|_| format!("expected a number of pixels or \"auto\", got {value:?}")),
     }
 }

@@ -110,9 +110,10 @@ pub fn predict(
     let (lines, fragments) = match options.iterations {
         0 => (0, 0),
         _ => {
-            let r = options.bundle_resolution as u64;
+            let resolution = options.bundle_resolution_for(scene, patches);
+            let r = resolution as u64;
             let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
-            let bound = crate::iteration::fragment_bound(patches, radius, options.bundle_resolution);
+            let bound = crate::iteration::fragment_bound(patches, radius, resolution);
             (r * r, options.bundle_capacity.unwrap_or_else(|| initial_fragment_capacity(limits, bound)))
         }
     };

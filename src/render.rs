@@ -47,8 +47,9 @@ pub struct RenderOptions {
     /// Pixels along a full cube-face edge of the first shot's item buffers.
     pub hemicube_resolution: u32,
     pub light_window: LightWindow,
-    /// Pixels along each edge of a bundle's parallel projection.
-    pub bundle_resolution: u32,
+    /// Pixels along each edge of a bundle's parallel projection; `None`: chosen from the
+    /// patches and the views (`iteration::auto_bundle_resolution`).
+    pub bundle_resolution: Option<u32>,
     /// Whether lights are first shot (else area lights are emitters in the iteration).
     pub first_shot: bool,
     /// Stop the iteration (or the passes of a direct-light image) after this much wall time
@@ -109,6 +110,15 @@ impl RenderOptions {
             window_steps: DEFAULT_WINDOW_STEPS,
             cameras: Vec::new(),
         }
+    }
+
+    /// The bundle resolution of a render of `patches`: the one asked for, else the automatic
+    /// choice for them and the views (`iteration::auto_bundle_resolution`).
+    pub fn bundle_resolution_for(&self, scene: &Scene, patches: &Patches) -> u32 {
+        self.bundle_resolution.unwrap_or_else(|| {
+            let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+            crate::iteration::auto_bundle_resolution(patches, radius, &self.views(scene))
+        })
     }
 
     /// The views of the render, in order: `cameras`, or the scene's camera at `width` x
@@ -395,7 +405,9 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
         )));
     }
     if options.iterations > 0 {
-        let r = options.bundle_resolution;
+        // The automatic choice (`None`) stays within AUTO_BUNDLE_MAX, which every device's
+        // textures allow (wgpu's smallest limit is 2048).
+        let r = options.bundle_resolution.unwrap_or(crate::iteration::AUTO_BUNDLE_MAX);
         if !(crate::iteration::MIN_BUNDLE_RESOLUTION..=max_dim).contains(&r) {
             return Err(Error::Limits(format!(
                 "--bundle-resolution {r}: expected {} to {max_dim} (the device's largest texture side)",
@@ -608,6 +620,10 @@ impl<'a> Renderer<'a> {
         hooks: &mut dyn Hooks,
     ) -> Result<Self> {
         let start = Instant::now();
+        let resolved =
+            RenderOptions { bundle_resolution: Some(options.bundle_resolution_for(scene, patches)), ..options.clone() };
+        let options = &resolved;
+        let bundle_resolution = options.bundle_resolution_for(scene, patches);
         check_options(scene, options)?;
         check_limits(&ctx.limits(), patches, options)?;
         let memory = predict_memory(ctx, scene, patches, options);
@@ -628,9 +644,8 @@ impl<'a> Renderer<'a> {
         let iteration = if options.iterations == 0 {
             None
         } else {
-            let capacity = options
-                .bundle_capacity
-                .unwrap_or_else(|| fragment_bound(patches, buffers.radius, options.bundle_resolution));
+            let capacity =
+                options.bundle_capacity.unwrap_or_else(|| fragment_bound(patches, buffers.radius, bundle_resolution));
             // The bound of many small patches can exceed one binding while a step's
             // fragments do not (they grow with the lines, not the patches): start at most at
             // one binding, and grow only if a step needs it.
@@ -638,7 +653,7 @@ impl<'a> Renderer<'a> {
                 Some(c) => c,
                 None => crate::memory::initial_fragment_capacity(&ctx.limits(), capacity),
             };
-            Some(Iteration::new(ctx, &buffers, options.bundle_resolution, capacity)?)
+            Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity)?)
         };
         let gathers = iteration.is_some();
         let views = options
@@ -942,7 +957,7 @@ impl<'a> Renderer<'a> {
                 shadow_resolution: self.direct.resolution,
                 shadow_atlas_texels: self.direct.atlas_texels(),
                 memory: crate::memory::MemoryPlan { peak_rss_bytes: crate::memory::peak_rss(), ..self.memory.clone() },
-                bundle_resolution: o.bundle_resolution,
+                bundle_resolution: o.bundle_resolution.unwrap_or_default(),
                 bundle_capacity: iteration_stats.capacity,
                 iteration_ms_median: iteration_stats.step_ms_median,
                 iteration_ms: iteration_stats.ms,

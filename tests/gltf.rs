@@ -186,7 +186,7 @@ fn test02_a_gltf_box_renders_bit_identically_to_the_same_box_in_toml() {
         (options.width, options.height) = (24, 24);
         options.iterations = 8;
         options.hemicube_resolution = 64;
-        options.bundle_resolution = 48;
+        options.bundle_resolution = Some(48);
         options.patch_size = 2.0;
         let patches = scene::tessellate(s, options.patch_size).unwrap();
         render(&ctx, s, &patches, &options).unwrap().image
@@ -395,7 +395,7 @@ fn test06_a_real_world_gltf_loads_and_renders() {
     (options.width, options.height) = (48, 36);
     options.iterations = 4;
     options.hemicube_resolution = 64;
-    options.bundle_resolution = 64;
+    options.bundle_resolution = Some(64);
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let image = render(&ctx, &scene, &patches, &options).unwrap().image;
     let lit = image.pixels.iter().filter(|p| p.iter().all(|&c| c.is_finite()) && p[1] > 0.0).count();

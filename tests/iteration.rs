@@ -29,7 +29,7 @@ fn options(scene: &firstshot::scene::Scene, iterations: u32, seed: u64) -> Rende
     let mut o = RenderOptions::from_scene(scene);
     o.iterations = iterations;
     o.seed = seed;
-    o.bundle_resolution = 64;
+    o.bundle_resolution = Some(64);
     o.first_shot = false;
     o
 }
@@ -131,7 +131,7 @@ fn test02_received_radiance_matches_the_form_factor() {
     let runs: Vec<f64> = (0..8)
         .map(|seed| {
             let mut o = options(&scene, 250, 100 + seed);
-            o.bundle_resolution = 48;
+            o.bundle_resolution = Some(48);
             let image = render(&ctx, &scene, &patches, &o).unwrap().image;
             // The centre pixels see the receiver (the camera looks at it from 0.2 away).
             let centre: Vec<f64> =
@@ -249,4 +249,78 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
     // The reflection reads every entry: its unrolled sum has one term per entry.
     let reflect = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/wgsl/bundle_reflect.wgsl")).unwrap();
     assert_eq!(reflect.matches("earlier_glossy(m, n, s.earlier[").count(), GLOSSY_HISTORY, "bundle_reflect.wgsl");
+}
+
+#[test]
+fn test07_the_automatic_bundle_resolution_follows_the_patches_and_the_image() {
+    // CPU only. The two rules of `auto_bundle_resolution`, each checked alone against its
+    // own closed form, then together, then at both clamps.
+    use firstshot::iteration::{AUTO_BUNDLE_LINE_PIXELS, AUTO_BUNDLE_MAX, AUTO_BUNDLE_MIN, auto_bundle_resolution};
+    use firstshot::scene::{Camera, NamedCamera};
+    let up64 = |x: f64| ((x.ceil() as u32).div_ceil(64) * 64).clamp(AUTO_BUNDLE_MIN, AUTO_BUNDLE_MAX);
+    // A 10 x 10 grid of right triangles of legs s (area s^2 / 2) in the plane z = 0, facing +z.
+    let grid = |s: f64| -> Vec<[DVec3; 3]> {
+        (0..100)
+            .map(|i| {
+                let c = DVec3::new((i % 10) as f64 * s, (i / 10) as f64 * s, 0.0);
+                [c, c + DVec3::new(s, 0.0, 0.0), c + DVec3::new(0.0, s, 0.0)]
+            })
+            .collect()
+    };
+    let radius = 10.0;
+    // Patches: one line per step on average for the median patch, r = 2 radius sqrt(2 / A).
+    let s = 0.05;
+    let patches = common::patches_of(&grid(s), vec![]);
+    let area = s * s / 2.0;
+    let by_patches = up64(2.0 * radius * (2.0 / area).sqrt());
+    assert_eq!(auto_bundle_resolution(&patches, radius, &[]), by_patches);
+    assert!(by_patches > AUTO_BUNDLE_MIN && by_patches < AUTO_BUNDLE_MAX, "{by_patches}");
+    // ... and the result, fed back: A / (2 dP) >= 1 with dP the square of 2 radius / r.
+    let line = 2.0 * radius / by_patches as f64;
+    assert!(area / (2.0 * line * line) >= 1.0);
+
+    // The image: large patches (the patch rule asks for the minimum) seen by a camera on the
+    // grid's axis at distance 8 from its plane, looking at its centre.
+    let big = common::patches_of(&grid(1.0), vec![]);
+    assert_eq!(auto_bundle_resolution(&big, radius, &[]), AUTO_BUNDLE_MIN);
+    let centre = DVec3::new(5.0, 5.0, 0.0);
+    let camera = |height: u32| NamedCamera {
+        name: "camera".into(),
+        camera: Camera {
+            position: centre + DVec3::new(0.0, 0.0, 8.0),
+            look_at: centre,
+            up: DVec3::Y,
+            fov_y: 40.0,
+            width: height,
+            height,
+        },
+    };
+    // The patch centres the camera sees (within 8 tan 20 = 2.9 of the axis) lie at distances
+    // from 8 to 9; the median, weighted by solid angle, lies between. A line of
+    // AUTO_BUNDLE_LINE_PIXELS pixels there.
+    let wanted = |distance: f64, height: u32| {
+        let footprint = AUTO_BUNDLE_LINE_PIXELS * distance * 2.0 * (20.0f64).to_radians().tan() / height as f64;
+        2.0 * radius / footprint
+    };
+    for height in [200, 400] {
+        let r = auto_bundle_resolution(&big, radius, &[camera(height)]);
+        assert!(
+            r >= up64(wanted(9.0, height)) && r <= up64(wanted(8.0, height)),
+            "{height} pixels: {r} outside [{}, {}]",
+            up64(wanted(9.0, height)),
+            up64(wanted(8.0, height))
+        );
+    }
+    // The finest view decides; the patch rule and the image rule, the larger.
+    let both = auto_bundle_resolution(&big, radius, &[camera(200), camera(400)]);
+    assert_eq!(both, auto_bundle_resolution(&big, radius, &[camera(400)]));
+    let small = auto_bundle_resolution(&patches, radius, &[camera(200)]);
+    assert_eq!(small, by_patches.max(auto_bundle_resolution(&big, radius, &[camera(200)])));
+    // A camera looking away sees no patch: only the patch rule counts.
+    let mut away = camera(400);
+    away.camera.look_at = away.camera.position + DVec3::new(0.0, 0.0, 1.0);
+    assert_eq!(auto_bundle_resolution(&big, radius, &[away]), AUTO_BUNDLE_MIN);
+    // Patches far too small for any grid: the largest the rule takes by itself.
+    let tiny = common::patches_of(&grid(1e-4), vec![]);
+    assert_eq!(auto_bundle_resolution(&tiny, radius, &[]), AUTO_BUNDLE_MAX);
 }

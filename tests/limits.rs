@@ -16,7 +16,7 @@ fn cornell_box() -> (Patches, RenderOptions) {
     let mut options = RenderOptions::from_scene(&scene);
     options.width = 32;
     options.height = 32;
-    options.bundle_resolution = 64;
+    options.bundle_resolution = Some(64);
     options.hemicube_resolution = 64;
     let patches = scene::tessellate(&scene, options.patch_size).expect("tessellates");
     (patches, options)
@@ -144,7 +144,7 @@ fn test04_hand_made_patches() {
 #[test]
 fn test05_an_image_wider_or_taller_than_a_texture_is_refused() {
     let (patches, options) = cornell_box();
-    let options = RenderOptions { hemicube_resolution: 32, bundle_resolution: 32, ..options };
+    let options = RenderOptions { hemicube_resolution: 32, bundle_resolution: Some(32), ..options };
     let limits = wgpu::Limits { max_texture_dimension_2d: 32, ..defaults() };
     check_limits(&limits, &patches, &options).expect("32 x 32 fits a texture side of 32");
     for (width, height) in [(33, 32), (32, 33), (1000, 1)] {
@@ -183,10 +183,10 @@ fn test06_hemicube_and_bundle_resolutions_beyond_the_device() {
     // Without the first shot no hemicube is rendered.
     check_limits(&limits, &patches, &RenderOptions { first_shot: false, ..hemicube }).expect("no first shot");
 
-    let bundle = RenderOptions { bundle_resolution: 65, ..options.clone() };
+    let bundle = RenderOptions { bundle_resolution: Some(65), ..options.clone() };
     refused(check_limits(&limits, &patches, &bundle), &["--bundle-resolution 65", "64"]);
     refused(
-        check_limits(&limits, &patches, &RenderOptions { bundle_resolution: 2, ..options.clone() }),
+        check_limits(&limits, &patches, &RenderOptions { bundle_resolution: Some(2), ..options.clone() }),
         &["--bundle-resolution 2", "expected 4 to 64"],
     );
     // Without iterations no bundle is cast.
@@ -194,7 +194,7 @@ fn test06_hemicube_and_bundle_resolutions_beyond_the_device() {
 
     // A side the textures allow, but a line table (4 bytes a line) larger than any buffer:
     // the case that reached wgpu as a validation panic from small scenes.
-    let wide = RenderOptions { bundle_resolution: 8192, ..options.clone() };
+    let wide = RenderOptions { bundle_resolution: Some(8192), ..options.clone() };
     let lines = firstshot::iteration::line_table_bytes(8192);
     assert_eq!(lines, 4 * (8192 * 8192 + 1));
     refused(

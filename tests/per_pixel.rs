@@ -305,7 +305,7 @@ fn test04_no_start_up_bias() {
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (48, 48);
     (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, 128, Some(128));
-    options.bundle_resolution = 128;
+    options.bundle_resolution = Some(128);
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let run = |iterations| {
         let o = RenderOptions { iterations, ..options.clone() };
@@ -369,7 +369,7 @@ fn test07_an_image_sum_in_bands_of_rows_is_the_same_bits() {
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (40, 30);
     (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, 64, Some(64));
-    (options.bundle_resolution, options.iterations, options.burn_in) = (64, 12, Some(2));
+    (options.bundle_resolution, options.iterations, options.burn_in) = (Some(64), 12, Some(2));
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let whole = render(&ctx, &scene, &patches, &options).unwrap();
     let banded =

@@ -39,7 +39,7 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
         first_shot: false,
         iterations: 3,
         seed: 7,
-        bundle_resolution: RESOLUTION,
+        bundle_resolution: Some(RESOLUTION),
         // Every step reaches the image, so every stage runs.
         burn_in: Some(0),
         // Steps 0 and 2 estimate the direct light and gather, step 1 only gathers.

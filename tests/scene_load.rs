@@ -58,7 +58,7 @@ fn test01_cornell_box_loads() {
     assert_eq!(scene.environment, [0.0; 3]);
     assert_eq!(
         scene.settings,
-        Settings { patch_size: 40.0, hemicube_resolution: 512, bundle_resolution: 512, iterations: 1000, seed: 1 }
+        Settings { patch_size: 40.0, hemicube_resolution: 512, bundle_resolution: None, iterations: 1000, seed: 1 }
     );
     let [Light::Area { radiance, subdivisions, .. }] = scene.lights[..] else {
         panic!("expected one area light: {:?}", scene.lights);
@@ -428,6 +428,9 @@ fn test12_settings_and_environment_refusals() {
     refused(&with("hemicube_resolution = 16385"), "settings.hemicube_resolution");
     refused(&with("bundle_resolution = 0"), "settings.bundle_resolution");
     refused(&with("bundle_resolution = 1e9"), "settings.bundle_resolution");
+    assert_contains(&refused(&with("bundle_resolution = \"fine\""), "settings.bundle_resolution"), "\"auto\"");
+    assert_eq!(load_str(&with("bundle_resolution = \"auto\""), source()).unwrap().settings.bundle_resolution, None);
+    assert_eq!(load_str(&with("bundle_resolution = 96"), source()).unwrap().settings.bundle_resolution, Some(96));
     refused(&with("iterations = -1"), "settings.iterations");
     refused(&with("seed = -1"), "settings.seed");
     let scene = load_str(&with("iterations = 0\nseed = 7\npatch_size = 0.5"), source()).unwrap();

@@ -84,7 +84,7 @@ fn long_path(dir: &Path, scene: &str, o: &RenderOptions) -> PathBuf {
         if o.first_shot { "fs" } else { "nofs" },
         o.width,
         o.height,
-        o.bundle_resolution,
+        o.bundle_resolution.unwrap_or_default(),
         o.hemicube_resolution,
         o.patch_size,
         o.iterations,
@@ -138,7 +138,9 @@ pub(crate) fn reference_for(config: &Config, scene: &str) -> Option<PathBuf> {
 
 fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<SceneResult, String> {
     let ctx = slot.open(config.timestamps)?;
-    let base = config.options(&s.scene);
+    let mut base = config.options(&s.scene);
+    // The resolution the renders will take, in the long runs' file names and the results.
+    base.bundle_resolution = Some(base.bundle_resolution_for(&s.scene, &s.patches));
     let mut warm = base.clone();
     warm.iterations = 2;
     render(&ctx, &s.scene, &s.patches, &warm).map_err(|e| e.to_string())?;
@@ -268,7 +270,7 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<SceneResult,
             s.patches.patches.len(),
             base.width,
             base.height,
-            base.bundle_resolution,
+            base.bundle_resolution.unwrap_or_default(),
             base.hemicube_resolution,
             config.long_steps
         ),
@@ -285,7 +287,7 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<SceneResult,
         adapter: slot.clone(),
         patches: s.patches.patches.len(),
         image: [base.width, base.height],
-        bundle_resolution: base.bundle_resolution,
+        bundle_resolution: base.bundle_resolution.unwrap_or_default(),
         hemicube_resolution: base.hemicube_resolution,
         seed: base.seed,
         long_seed,

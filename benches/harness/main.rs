@@ -166,10 +166,10 @@ impl Config {
     pub fn options(&self, scene: &Scene) -> RenderOptions {
         let mut o = RenderOptions::from_scene(scene);
         if self.quick {
-            (o.width, o.height, o.hemicube_resolution, o.bundle_resolution) = (128, 128, 128, 128);
+            (o.width, o.height, o.hemicube_resolution, o.bundle_resolution) = (128, 128, 128, Some(128));
         }
         if let Some(r) = self.bundle_resolution {
-            o.bundle_resolution = r;
+            o.bundle_resolution = Some(r);
         }
         o.first_shot = self.first_shot;
         o

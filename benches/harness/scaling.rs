@@ -67,7 +67,7 @@ fn measure(
     let s = sierpinski(level)?;
     let mut options = config.options(&s.scene);
     if let Some(r) = resolution {
-        options.bundle_resolution = r;
+        options.bundle_resolution = Some(r);
     }
     let mut session = Session::new(ctx, &s.scene, &s.patches, &options).map_err(|e| e.to_string())?;
     let first_shot_ms = session.first_shot.as_ref().map_or(0.0, |f| f.ms);
@@ -92,7 +92,7 @@ fn measure(
     Ok(Row {
         study,
         level,
-        bundle_resolution: options.bundle_resolution,
+        bundle_resolution: options.bundle_resolution_for(&s.scene, &s.patches),
         patches: s.patches.patches.len(),
         first_shot_ms,
         step_ms: summary(&per_repeat),
@@ -109,7 +109,8 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
         eprintln!("scaling runs on the first selected adapter only: {}", slot.label());
     }
     let ctx = slot.open(config.timestamps)?;
-    let default_resolution = config.options(&sierpinski(3)?.scene).bundle_resolution;
+    let level3 = sierpinski(3)?;
+    let default_resolution = config.options(&level3.scene).bundle_resolution_for(&level3.scene, &level3.patches);
     let mut plan: Vec<(&'static str, u32, Option<u32>)> = config.levels.iter().map(|&l| ("patches", l, None)).collect();
     plan.extend(config.resolutions.iter().map(|&r| ("resolution", 6, Some(r))));
     let mut rows = Vec::new();

@@ -216,7 +216,11 @@ fn settings(t: &Tbl) -> Result<Settings> {
         s.hemicube_resolution = r.integer(1, MAX_RESOLUTION)? as u32;
     }
     if let Some(r) = t.get("bundle_resolution") {
-        s.bundle_resolution = r.integer(1, MAX_RESOLUTION)? as u32;
+        s.bundle_resolution = match r.value.as_str() {
+            Some("auto") => None,
+            Some(_) => return Err(r.expected("an integer or \"auto\"")),
+            None => Some(r.integer(1, MAX_RESOLUTION)? as u32),
+        };
     }
     if let Some(i) = t.get("iterations") {
         // 0 is meaningful: first shot only.

@@ -85,7 +85,8 @@ impl Scene {
 pub struct Settings {
     pub patch_size: f64,
     pub hemicube_resolution: u32,
-    pub bundle_resolution: u32,
+    /// `None`: chosen from the patches and the image (`iteration::auto_bundle_resolution`).
+    pub bundle_resolution: Option<u32>,
     pub iterations: u32,
     pub seed: u64,
 }
@@ -95,7 +96,7 @@ impl Default for Settings {
         Settings {
             patch_size: f64::INFINITY,
             hemicube_resolution: 256,
-            bundle_resolution: 256,
+            bundle_resolution: None,
             iterations: 100,
             seed: 1,
         }
