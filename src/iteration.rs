@@ -188,6 +188,8 @@ pub struct GatherBuffers {
     pub fragments: wgpu::Buffer,
     /// Its pages (`scene_buffers::OUTGOING`).
     pub image_outgoing: Vec<wgpu::Buffer>,
+    /// Lbar_j before this step (`bundle_reflect`'s image_mean_radiance), in pages.
+    pub image_mean_radiance: Vec<wgpu::Buffer>,
 }
 
 /// The buffers and stages of a step.
@@ -234,6 +236,7 @@ impl Iteration {
         let (pages, paged) = (scene.page_bytes, crate::gpu::scene_buffers::Paged::zeroed);
         let outgoing = paged(device, "firstshot.iteration.outgoing", OUTGOING, n, pages, none);
         let image_outgoing = paged(device, "firstshot.iteration.image_outgoing", OUTGOING, n, pages, none);
+        let image_mean_radiance = paged(device, "firstshot.iteration.image_mean_radiance", OUTGOING, n, pages, none);
         let max_bits = buffers::storage_zeroed(device, "firstshot.iteration.max_bits", 16, none);
         let counts = buffers::storage_zeroed(device, "firstshot.iteration.counts", 4 * (lines as u64 + 1), none);
         // COPY_SRC: `fragments` reads its last entry back.
@@ -248,7 +251,15 @@ impl Iteration {
         let overflow = buffers::storage_zeroed(device, "firstshot.iteration.overflow", 4, wgpu::BufferUsages::COPY_SRC);
         let sums = paged(device, "firstshot.iteration.sums", TRANSFER_SUMS, n, pages, none);
         Ok(Iteration {
-            reflect: BundleReflect::new(device, scene, &bundle, &outgoing, &max_bits, &image_outgoing),
+            reflect: BundleReflect::new(
+                device,
+                scene,
+                &bundle,
+                &outgoing,
+                &max_bits,
+                &image_outgoing,
+                &image_mean_radiance,
+            ),
             visibility: BundleVisibility::new(
                 device,
                 [
@@ -292,6 +303,7 @@ impl Iteration {
                 offsets: offsets.clone(),
                 fragments: fragments.clone(),
                 image_outgoing: image_outgoing.pages.clone(),
+                image_mean_radiance: image_mean_radiance.pages.clone(),
             },
             bundle,
             counts,
@@ -301,7 +313,14 @@ impl Iteration {
             offsets: offsets.clone(),
             capacity: capacity as u32,
             resolution,
-            _owned: [outgoing.pages, image_outgoing.pages, vec![offsets, fragments], sums.pages].concat(),
+            _owned: [
+                outgoing.pages,
+                image_outgoing.pages,
+                image_mean_radiance.pages,
+                vec![offsets, fragments],
+                sums.pages,
+            ]
+            .concat(),
         })
     }
 

@@ -13,10 +13,13 @@ use crate::{Error, Result};
 use serde::Serialize;
 
 /// GPU bytes per patch besides the paged arrays: the triangles (3 `RasterVertex`), the
-/// first-shot row starts (4), and the copy of the state kept to redo a batch of steps
-/// (`GpuPatchState`).
-const OTHER_DEVICE_BYTES_PER_PATCH: u64 =
-    3 * size_of::<RasterVertex>() as u64 + 4 + size_of::<crate::layout::GpuPatchState>() as u64;
+/// first-shot row starts (4), the copy of the state kept to redo a batch of steps
+/// (`GpuPatchState`), and the two further arrays of the outgoing radiance's kind that the
+/// image reads (`iteration`: image_outgoing and image_mean_radiance).
+const OTHER_DEVICE_BYTES_PER_PATCH: u64 = 3 * size_of::<RasterVertex>() as u64
+    + 4
+    + size_of::<crate::layout::GpuPatchState>() as u64
+    + 2 * crate::gpu::scene_buffers::OUTGOING.bytes;
 /// GPU bytes per patch while the first shot runs: its 64-bit sums (8), row counts (4), fill
 /// cursors (4) and prefix-sum scratch (4).
 const FIRST_SHOT_BYTES_PER_PATCH: u64 = 20;

@@ -20,6 +20,7 @@
 @group(0) @binding(4) var<storage, read_write> outgoing: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> max_bits: atomic<u32>;
 @group(0) @binding(6) var<storage, read_write> image_outgoing: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> image_mean_radiance: array<vec4<f32>>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -49,8 +50,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // win, drawn before this step's d, so their mean is as unbiased as one and spreads a
     // spike of one step's J over as many gather directions: docs/ALGORITHM.md 6).
     var image_o = o;
+    var mean_radiance = vec3<f32>(0.0);
     if (bundle.use_state != 0u) {
         let s = state_at(j);
+        mean_radiance = s.mean_radiance.rgb;
         let glossy = glossy_reflection(m, n, s.incoming.rgb, -s.direction.xyz, w_out);
         o += 2.0 * m.diffuse.rgb * s.diffuse.rgb + glossy;
         var mean = s.diffuse.rgb;
@@ -77,6 +80,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     outgoing_set(j, vec4<f32>(o, side));
     image_outgoing_set(j, vec4<f32>(image_o, side));
+    // Lbar_j as it stands before this step's d (finalize updates it with this step's J):
+    // the gather's control variate at j's own pixels.
+    image_mean_radiance_set(j, vec4<f32>(mean_radiance, 0.0));
     let largest = abs(o);
     atomicMax(&max_bits, bitcast<u32>(max(largest.r, max(largest.g, largest.b))));
 }

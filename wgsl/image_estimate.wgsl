@@ -46,6 +46,7 @@
 @group(2) @binding(1) var<storage, read> offsets: array<u32>;
 @group(2) @binding(2) var<storage, read> fragments: array<vec2<u32>>;
 @group(2) @binding(3) var<storage, read> image_outgoing: array<vec4<f32>>;
+@group(2) @binding(4) var<storage, read> image_mean_radiance: array<vec4<f32>>;
 
 // The segment from y to x leaves out this share of its length at each end: its ends lie on
 // the light and on x's own surface.
@@ -522,7 +523,17 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         let toward = s * d;
         // -s d has density 1 / (2 pi) on x's hemisphere.
         let incoming = gathered(at.j, at.x, toward, s);
-        radiance = 2.0 * PI * incoming * abs(dot(at.n, d)) * brdf(m, at.n, toward, at.w_out);
+        let cos_d = abs(dot(at.n, d));
+        // The diffuse part with the control variate of the state's K_j (bundle_finalize):
+        // 2 pi (kd / pi) (|n . d| L - (|n . d| - 1/2) Lbar_j) has the mean of
+        // 2 pi (kd / pi) |n . d| L, because |n . d| has mean 1/2 over x's hemisphere and
+        // Lbar_j was drawn before d; where L is near Lbar_j (the bulk of the indirect light)
+        // it has almost none of the variance of the factor |n . d|.
+        let mean = image_mean_radiance_at(at.j).rgb;
+        radiance = 2.0 * m.diffuse.rgb * (cos_d * incoming - (cos_d - 0.5) * mean);
+        if (dot(at.n, toward) > 0.0 && dot(at.n, at.w_out) > 0.0) {
+            radiance += 2.0 * PI * incoming * cos_d * brdf_glossy(m, at.n, toward, at.w_out);
+        }
     }
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }

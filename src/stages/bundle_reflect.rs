@@ -25,6 +25,9 @@ pub const SPEC: KernelSpec = KernelSpec {
             // rgb what the image gathers from j (its diffuse reflection of the mean J of the
             // image steps so far), w s_j; one writer per patch.
             read_write::<[f32; 4]>("image_outgoing").paged(OUTGOING.pages),
+            // rgb Lbar_j as this step found it, before finalize updates it: the control
+            // variate of the image's gather at j's own pixels; one writer per patch.
+            read_write::<[f32; 4]>("image_mean_radiance").paged(OUTGOING.pages),
         ],
         FIRST_SHOT_TABLE_GROUP,
     ],
@@ -45,6 +48,7 @@ impl BundleReflect {
         outgoing: &Paged,
         max_bits: &wgpu::Buffer,
         image_outgoing: &Paged,
+        image_mean_radiance: &Paged,
     ) -> Self {
         let built = SPEC.build_paged(device, scene.paging());
         BundleReflect {
@@ -60,6 +64,7 @@ impl BundleReflect {
                     ("outgoing", outgoing.resource()),
                     ("max_bits", max_bits.into()),
                     ("image_outgoing", image_outgoing.resource()),
+                    ("image_mean_radiance", image_mean_radiance.resource()),
                 ],
             ),
             table_group: scene.first_shot.bind_group(device, &built.layouts[1], built.paging, &scene.samples),

@@ -49,6 +49,9 @@ pub const SPEC: KernelSpec = KernelSpec {
             read::<[u32; 2]>("fragments"),
             // What each patch sends the image this step (`bundle_reflect`'s image_outgoing).
             read::<[f32; 4]>("image_outgoing").paged(crate::gpu::scene_buffers::OUTGOING.pages),
+            // Lbar_j before this step (`bundle_reflect`'s image_mean_radiance): the control
+            // variate of the gather at patch j's pixels.
+            read::<[f32; 4]>("image_mean_radiance").paged(crate::gpu::scene_buffers::OUTGOING.pages),
         ],
     ],
 };
@@ -160,8 +163,8 @@ impl ImageEstimate {
     /// Group 2; without an iteration, placeholders that `direct` never reads.
     fn gather_group(device: &wgpu::Device, built: &Kernel, gather: Option<&GatherBuffers>) -> wgpu::BindGroup {
         let placeholder;
-        let (bundle, offsets, fragments, outgoing) = match gather {
-            Some(g) => (&g.bundle, &g.offsets, &g.fragments, &g.image_outgoing[..]),
+        let (bundle, offsets, fragments, outgoing, mean) = match gather {
+            Some(g) => (&g.bundle, &g.offsets, &g.fragments, &g.image_outgoing[..], &g.image_mean_radiance[..]),
             None => {
                 let none = wgpu::BufferUsages::empty();
                 placeholder = [
@@ -174,7 +177,8 @@ impl ImageEstimate {
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_fragments", 16, none),
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_image_outgoing", 16, none),
                 ];
-                (&placeholder[0], &placeholder[1], &placeholder[2], std::slice::from_ref(&placeholder[3]))
+                let page = std::slice::from_ref(&placeholder[3]);
+                (&placeholder[0], &placeholder[1], &placeholder[2], page, page)
             }
         };
         built.bind_group(
@@ -185,6 +189,7 @@ impl ImageEstimate {
                 ("offsets", offsets.into()),
                 ("fragments", fragments.into()),
                 ("image_outgoing", crate::gpu::bindings::Resource::Pages(outgoing)),
+                ("image_mean_radiance", crate::gpu::bindings::Resource::Pages(mean)),
             ],
         )
     }
