@@ -281,42 +281,38 @@ struct Candidate {
     patch_id: u32,
 }
 
-// `best`, or fragment k of the line [begin, end) if its surface lies nearer ahead of x along
-// the ray x + t toward. Wrapped indices (below begin) are out of range.
-fn nearer(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, toward: vec3<f32>, eps: f32) -> Candidate {
+// The two nearest candidates among a line's fragments ahead of x: `hit`, the nearest whose
+// triangle x's own ray x + t toward hits (Moller-Trumbore), and `plane`, the nearest by the
+// exact distance along that ray to its plane.
+struct Nearest {
+    hit: Candidate,
+    plane: Candidate,
+}
+
+// `n` with fragment k of the line [begin, end) considered for both (one load of its patch
+// serves both tests). Wrapped indices (below begin) are out of range.
+fn consider(n: Nearest, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, toward: vec3<f32>, eps: f32) -> Nearest {
     if (k < range.x || k >= range.y) {
-        return best;
+        return n;
     }
     let m = fragments[k].y & ~FRAGMENT_FRONT_BIT;
     let plane = patches_at(m).normal;
-    let denom = dot(plane.xyz, toward);
     // Distance from x to m's plane: ~0 for j's twin and the patches beside j in its plane,
     // which are not ahead of x whatever f32 rounding says.
     let dist = plane.w - dot(plane.xyz, x);
-    if (m == j || abs(denom) < 1e-6 || abs(dist) <= eps) {
-        return best;
+    if (m == j || abs(dist) <= eps) {
+        return n;
     }
-    let t = dist / denom;
+    var out = n;
+    let denom = dot(plane.xyz, toward);
     // Back-to-back twins lie at the same t (their planes are each other's negation), but
     // rounding can sort either first along the line: of the two, the one facing x counts.
-    let tie = abs(t - best.t) <= eps && denom < 0.0;
-    if (t > 0.0 && (t < best.t - eps || tie)) {
-        return Candidate(t, m + 1u);
-    }
-    return best;
-}
-
-// `best`, or fragment k of the line [begin, end) if x's own ray x + t toward hits its
-// triangle nearer ahead (Moller-Trumbore; the same distances as `nearer`).
-fn nearer_hit(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, toward: vec3<f32>, eps: f32) -> Candidate {
-    if (k < range.x || k >= range.y) {
-        return best;
-    }
-    let m = fragments[k].y & ~FRAGMENT_FRONT_BIT;
-    let plane = patches_at(m).normal;
-    let dist = plane.w - dot(plane.xyz, x);
-    if (m == j || abs(dist) <= eps) {
-        return best;
+    if (abs(denom) >= 1e-6) {
+        let t = dist / denom;
+        let tie = abs(t - n.plane.t) <= eps && denom < 0.0;
+        if (t > 0.0 && (t < n.plane.t - eps || tie)) {
+            out.plane = Candidate(t, m + 1u);
+        }
     }
     let a = patches_at(m).v0.xyz;
     let e1 = patches_at(m).v1.xyz - a;
@@ -324,7 +320,7 @@ fn nearer_hit(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, t
     let p = cross(toward, e2);
     let det = dot(e1, p);
     if (abs(det) < 1e-30) {
-        return best;
+        return out;
     }
     let inv = 1.0 / det;
     let o = x - a;
@@ -332,11 +328,11 @@ fn nearer_hit(best: Candidate, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, t
     let q = cross(o, e1);
     let v = dot(toward, q) * inv;
     let t = dot(e2, q) * inv;
-    let tie = abs(t - best.t) <= eps && dot(plane.xyz, toward) < 0.0;
-    if (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0 && (t < best.t - eps || tie)) {
-        return Candidate(t, m + 1u);
+    let tie = abs(t - n.hit.t) <= eps && denom < 0.0;
+    if (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > 0.0 && (t < n.hit.t - eps || tie)) {
+        out.hit = Candidate(t, m + 1u);
     }
-    return best;
+    return out;
 }
 
 // The radiance arriving at x (on patch j, normal n) from direction `toward` (= s d) along
@@ -397,43 +393,33 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
     }
     // Else (x near j's edge, the line's centre on another patch) the line may pass through
     // a surface x's ray misses (a neighbour's back face: black) or beside one x's ray hits.
-    // First, the nearest of the next four fragments in the direction of travel whose
-    // triangle x's own ray hits: the surface x really sees that way, wherever it is on the
-    // line too.
-    var hit = Candidate(3.4e38, NO_PATCH);
+    // The next four fragments in the direction of travel are the candidates. Unrolled: a
+    // CPU adapter runs a data-dependent loop over storage many times slower.
+    let none = Candidate(3.4e38, NO_PATCH);
+    var n = Nearest(none, none);
     if (s > 0.0) {
-        hit = nearer_hit(hit, lo, range, j, x, toward, eps);
-        hit = nearer_hit(hit, lo + 1u, range, j, x, toward, eps);
-        hit = nearer_hit(hit, lo + 2u, range, j, x, toward, eps);
-        hit = nearer_hit(hit, lo + 3u, range, j, x, toward, eps);
+        n = consider(n, lo, range, j, x, toward, eps);
+        n = consider(n, lo + 1u, range, j, x, toward, eps);
+        n = consider(n, lo + 2u, range, j, x, toward, eps);
+        n = consider(n, lo + 3u, range, j, x, toward, eps);
     } else {
-        hit = nearer_hit(hit, lo - 1u, range, j, x, toward, eps);
-        hit = nearer_hit(hit, lo - 2u, range, j, x, toward, eps);
-        hit = nearer_hit(hit, lo - 3u, range, j, x, toward, eps);
-        hit = nearer_hit(hit, lo - 4u, range, j, x, toward, eps);
+        n = consider(n, lo - 1u, range, j, x, toward, eps);
+        n = consider(n, lo - 2u, range, j, x, toward, eps);
+        n = consider(n, lo - 3u, range, j, x, toward, eps);
+        n = consider(n, lo - 4u, range, j, x, toward, eps);
     }
-    // A back face as the nearest hit says the ray entered a solid through a face the line
-    // missed (x's ray and the line on two sides of its edge): that entry is not on the line,
-    // so the rules below decide, as they do where the ray hits nothing the line holds.
+    // First, the nearest whose triangle x's own ray hits: the surface x really sees that
+    // way, wherever it is on the line too. A back face as the nearest hit says the ray
+    // entered a solid through a face the line missed (x's ray and the line on two sides of
+    // its edge): that entry is not on the line, so the plane rule below decides, as it does
+    // where the ray hits nothing the line holds.
+    let hit = n.hit;
     if (hit.patch_id != NO_PATCH && dot(patches_at(hit.patch_id - 1u).normal.xyz, toward) < 0.0) {
         let m = hit.patch_id - 1u;
         return image_outgoing_at(m).rgb + emitted_share(m, x, toward);
     }
-    // Failing that, the nearest of the next four fragments in the direction of travel, by
-    // the exact distance from x along the ray to each one's plane. Unrolled: a CPU adapter
-    // runs a data-dependent loop over storage many times slower.
-    var best = Candidate(3.4e38, NO_PATCH);
-    if (s > 0.0) {
-        best = nearer(best, lo, range, j, x, toward, eps);
-        best = nearer(best, lo + 1u, range, j, x, toward, eps);
-        best = nearer(best, lo + 2u, range, j, x, toward, eps);
-        best = nearer(best, lo + 3u, range, j, x, toward, eps);
-    } else {
-        best = nearer(best, lo - 1u, range, j, x, toward, eps);
-        best = nearer(best, lo - 2u, range, j, x, toward, eps);
-        best = nearer(best, lo - 3u, range, j, x, toward, eps);
-        best = nearer(best, lo - 4u, range, j, x, toward, eps);
-    }
+    // Failing that, the nearest by the exact distance from x along the ray to its plane.
+    let best = n.plane;
     if (best.patch_id == NO_PATCH) {
         return bundle.environment.rgb;
     }
