@@ -596,7 +596,10 @@ pub struct ViewImage {
 pub struct Renderer<'a> {
     ctx: &'a Context,
     scene: &'a Scene,
+    /// As given (`bundle_resolution` may be `None`: automatic).
     options: RenderOptions,
+    /// The bundle resolution in use (`RenderOptions::bundle_resolution_for`).
+    bundle_resolution: u32,
     buffers: SceneBuffers,
     direct: DirectLights,
     /// One per camera (`RenderOptions::views`), never empty.
@@ -633,10 +636,13 @@ impl<'a> Renderer<'a> {
         hooks: &mut dyn Hooks,
     ) -> Result<Self> {
         let start = Instant::now();
-        let resolved =
-            RenderOptions { bundle_resolution: Some(options.bundle_resolution_for(scene, patches)), ..options.clone() };
-        let options = &resolved;
+        // The automatic bundle resolution, chosen once: the checks and the memory plan see
+        // the number. The Renderer keeps the options as given, whose fingerprint a
+        // checkpoint or shard carries (the choice follows from them and the scene).
+        let given = options;
         let bundle_resolution = options.bundle_resolution_for(scene, patches);
+        let resolved = RenderOptions { bundle_resolution: Some(bundle_resolution), ..options.clone() };
+        let options = &resolved;
         check_options(scene, options)?;
         check_limits(&ctx.limits(), patches, options)?;
         let memory = predict_memory(ctx, scene, patches, options);
@@ -687,7 +693,8 @@ impl<'a> Renderer<'a> {
         Ok(Renderer {
             ctx,
             scene,
-            options: options.clone(),
+            options: given.clone(),
+            bundle_resolution,
             near: buffers.radius * 1e-5,
             buffers,
             direct,
@@ -970,7 +977,7 @@ impl<'a> Renderer<'a> {
                 shadow_resolution: self.direct.resolution,
                 shadow_atlas_texels: self.direct.atlas_texels(),
                 memory: crate::memory::MemoryPlan { peak_rss_bytes: crate::memory::peak_rss(), ..self.memory.clone() },
-                bundle_resolution: o.bundle_resolution.unwrap_or_default(),
+                bundle_resolution: self.bundle_resolution,
                 bundle_capacity: iteration_stats.capacity,
                 iteration_ms_median: iteration_stats.step_ms_median,
                 iteration_ms: iteration_stats.ms,
