@@ -255,37 +255,8 @@ fn test03_closed_furnace_of_first_shot_emitters_stays_exact_on_average() {
     // per_pixel test03's furnace (every surface emits 1 and reflects half: the radiance is 2
     // everywhere), now with every surface a first-shot light: the first shot carries the
     // first reflection, the per-pixel direct light the emitters' light at every pixel.
-    let text = r#"
-format = 1
-[camera]
-position = [0.1, 0.6, -0.9]
-look_at = [0.0, -0.4, 0.5]
-up = [0.0, 1.0, 0.0]
-fov_y = 70.0
-width = 32
-height = 32
-[settings]
-patch_size = 0.4
-bundle_resolution = 128
-hemicube_resolution = 128
-[materials.half]
-type = "diffuse"
-albedo = [0.5, 0.5, 0.5]
-[[shapes]]
-type = "box"
-min = [-1.0, -1.0, -1.0]
-max = [1.0, 1.0, 1.0]
-material = "half"
-two_sided = true
-emission = [1.0, 1.0, 1.0]
-[[shapes]]
-type = "box"
-min = [-0.3, -1.0, -0.3]
-max = [0.3, 0.2, 0.3]
-material = "half"
-emission = [1.0, 1.0, 1.0]
-"#;
-    let (_scratch, scene) = load("furnace", text);
+    let text = format!("{}{}", common::scenes::HALF_FURNACE, common::scenes::HALF_FURNACE_INNER_BOX);
+    let (_scratch, scene) = load("furnace", &text);
     let Some(ctx) = common::gpu() else { return };
     let mut options = RenderOptions::from_scene(&scene);
     options.iterations = 800;

@@ -30,6 +30,44 @@ position = [0, 3, 0]
 power = [10, 10, 10]
 "#;
 
+/// A closed furnace: a 2 x 2 x 2 room whose walls emit 1 and reflect half on both sides,
+/// so the radiance is exactly 2 everywhere, seen from inside by a 32 x 32 camera.
+pub const HALF_FURNACE: &str = r#"
+format = 1
+[camera]
+position = [0.1, 0.6, -0.9]
+look_at = [0.0, -0.4, 0.5]
+up = [0.0, 1.0, 0.0]
+fov_y = 70.0
+width = 32
+height = 32
+[settings]
+patch_size = 0.4
+bundle_resolution = 128
+hemicube_resolution = 128
+[materials.half]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+[[shapes]]
+type = "box"
+min = [-1.0, -1.0, -1.0]
+max = [1.0, 1.0, 1.0]
+material = "half"
+two_sided = true
+emission = [1.0, 1.0, 1.0]
+"#;
+
+/// HALF_FURNACE's second shape, a box standing on the floor (emitting and reflecting as the
+/// room: the radiance stays 2, also at the contact).
+pub const HALF_FURNACE_INNER_BOX: &str = r#"
+[[shapes]]
+type = "box"
+min = [-0.3, -1.0, -0.3]
+max = [0.3, 0.2, 0.3]
+material = "half"
+emission = [1.0, 1.0, 1.0]
+"#;
+
 /// MINIMAL with each `(from, to)` replaced once (each `from` must occur).
 pub fn edited(edits: &[(&str, &str)]) -> String {
     let mut text = MINIMAL.to_string();
