@@ -24,6 +24,7 @@ use crate::gpu::{Context, buffers};
 use crate::layout::{GpuDirectLight, GpuWindowFace, LIGHT_AREA, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT};
 use crate::render::RenderOptions;
 use crate::rng::StepRng;
+use crate::scene::tessellate::median;
 use crate::scene::{Light, LightSample, PatchKind, Patches, Rgb, SampleKind, Scene, SpotCone};
 use crate::stages::light_window::WindowAtlas;
 use glam::DVec3;
@@ -39,8 +40,6 @@ pub const MIN_SHADOW_RESOLUTION: u32 = 8;
 /// The automatic shadow resolution (`auto_resolution`) makes a typical patch this many
 /// texels across.
 pub const TEXELS_PER_PATCH: f64 = 8.0;
-/// Patches `auto_resolution` looks at, at most, per light point (every k-th of a larger scene).
-const MEDIAN_SAMPLE: usize = 1 << 16;
 /// The largest face side the automatic choice takes by itself (`--shadow-resolution` may ask
 /// for more; the texel budget may give less).
 pub const AUTO_RESOLUTION_MAX: u32 = 2048;
@@ -165,8 +164,7 @@ pub fn auto_resolution(scene: &Scene, patches: &Patches, floor: u32) -> u32 {
     for y in points {
         q.clear();
         // A median needs no more than a regular sample of the patches (every k-th).
-        let stride = patches.patches.len().div_ceil(MEDIAN_SAMPLE).max(1);
-        q.extend(patches.patches.iter().step_by(stride).filter(|p| p.area > 0.0).map(|p| {
+        q.extend(patches.median_sample().map(|p| {
             let centre = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0;
             (y - centre).length() / p.area.sqrt()
         }));
@@ -175,15 +173,6 @@ pub fn auto_resolution(scene: &Scene, patches: &Patches, floor: u32) -> u32 {
         }
     }
     side_for(worst, floor)
-}
-
-/// The median of `q` (reordered), none if it is empty.
-fn median(q: &mut [f64]) -> Option<f64> {
-    if q.is_empty() {
-        return None;
-    }
-    let middle = q.len() / 2;
-    Some(*q.select_nth_unstable_by(middle, f64::total_cmp).1)
 }
 
 /// The face side that makes a patch of median q `TEXELS_PER_PATCH` texels across: a
@@ -205,8 +194,7 @@ fn side_for(median_q: f64, floor: u32) -> u32 {
 /// `AUTO_RESOLUTION_MAX`; a face that sees no patch gets `floor`.
 pub fn auto_face_sides(y: DVec3, forwards: &[DVec3], lit: Option<DVec3>, patches: &Patches, floor: u32) -> Vec<u32> {
     let mut q: Vec<Vec<f64>> = vec![Vec::new(); forwards.len()];
-    let stride = patches.patches.len().div_ceil(MEDIAN_SAMPLE).max(1);
-    for p in patches.patches.iter().step_by(stride).filter(|p| p.area > 0.0) {
+    for p in patches.median_sample() {
         let w = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - y;
         if lit.is_some_and(|n| n.dot(w) <= 0.0) {
             continue;

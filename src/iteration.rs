@@ -82,8 +82,6 @@ pub const AUTO_BUNDLE_MAX: u32 = 1024;
 /// How many pixel footprints wide a line may be at the median distance a view sees
 /// (`auto_bundle_resolution`).
 pub const AUTO_BUNDLE_LINE_PIXELS: f64 = 1.5;
-/// Patches sampled for the medians of the automatic choice (every k-th patch beyond it).
-const AUTO_BUNDLE_SAMPLE: usize = 1 << 16;
 
 /// The bundle resolution when neither the scene nor the command line sets one: the finer of
 /// what the patches and what the images need, rounded up to a multiple of 64 within
@@ -109,15 +107,9 @@ const AUTO_BUNDLE_SAMPLE: usize = 1 << 16;
 /// bundled scenes peaked at 256 x 256 and 512 x 512 (docs/PERFORMANCE.md, "Bundle
 /// resolution").
 pub fn auto_bundle_resolution(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> u32 {
-    let stride = patches.patches.len().div_ceil(AUTO_BUNDLE_SAMPLE).max(1);
-    let sampled = || patches.patches.iter().step_by(stride).filter(|p| p.area > 0.0);
-    let mut areas: Vec<f64> = sampled().map(|p| p.area).collect();
-    let mut wanted = 0.0_f64;
-    if !areas.is_empty() {
-        let middle = areas.len() / 2;
-        let median = *areas.select_nth_unstable_by(middle, f64::total_cmp).1;
-        wanted = 2.0 * radius * (2.0 / median).sqrt();
-    }
+    let sampled = patches.median_sample();
+    let mut areas: Vec<f64> = sampled.clone().map(|p| p.area).collect();
+    let mut wanted = crate::scene::tessellate::median(&mut areas).map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
     for view in views {
         let c = &view.camera;
         let forward = (c.look_at - c.position).normalize_or_zero();
@@ -126,7 +118,8 @@ pub fn auto_bundle_resolution(patches: &Patches, radius: f64, views: &[crate::sc
         let tan_y = (0.5 * c.fov_y.to_radians()).tan();
         let tan_x = tan_y * c.width as f64 / c.height.max(1) as f64;
         // (distance, solid angle) of each patch centre in the frustum.
-        let mut seen: Vec<(f64, f64)> = sampled()
+        let mut seen: Vec<(f64, f64)> = sampled
+            .clone()
             .filter_map(|p| {
                 let v = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - c.position;
                 let z = v.dot(forward);

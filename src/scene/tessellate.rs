@@ -153,7 +153,17 @@ pub struct PatchStats {
     pub total_area: f64,
 }
 
+/// Patches a median over them looks at, at most (every k-th of a larger scene).
+const MEDIAN_SAMPLE: usize = 1 << 16;
+
 impl Patches {
+    /// A regular sample of the patches of positive area (every k-th, at most about
+    /// `MEDIAN_SAMPLE`): all that the medians of the automatic resolutions need.
+    pub fn median_sample(&self) -> impl Iterator<Item = &Patch> + Clone {
+        let stride = self.patches.len().div_ceil(MEDIAN_SAMPLE).max(1);
+        self.patches.iter().step_by(stride).filter(|p| p.area > 0.0)
+    }
+
     pub fn stats(&self) -> PatchStats {
         let light_patches = self.patches.iter().filter(|p| matches!(p.kind, PatchKind::AreaLight { .. })).count();
         PatchStats {
@@ -163,6 +173,15 @@ impl Patches {
             total_area: self.patches.iter().map(|p| p.area).sum(),
         }
     }
+}
+
+/// The median of `q` (reordered), none if it is empty.
+pub fn median(q: &mut [f64]) -> Option<f64> {
+    if q.is_empty() {
+        return None;
+    }
+    let middle = q.len() / 2;
+    Some(*q.select_nth_unstable_by(middle, f64::total_cmp).1)
 }
 
 /// Tessellates every surface into triangles whose longest edge is at most `patch_size`
