@@ -89,7 +89,7 @@ pub(crate) struct RenderArgs {
     no_first_shot: bool,
     /// Pixels along an edge of each parallel projection of the iteration, or "auto": from
     /// the patch sizes and the image (the default unless the scene's [settings] set one).
-    #[arg(long, value_name = "R|auto", value_parser = parse_bundle_resolution)]
+    #[arg(long, value_name = "R|auto", value_parser = parse_bundle_resolution, allow_negative_numbers = true)]
     bundle_resolution: Option<BundleResolution>,
     /// Random seed; the same seed, scene and flags give the same image.
     #[arg(long, value_name = "N")]

@@ -114,6 +114,9 @@ fn test02_usage_errors_exit_2_and_write_nothing() {
         (vec!["--direct-passes", "0"], "--direct-passes 0"),
         (vec!["--window-steps", "0"], "--window-steps 0"),
         (vec!["--burn-in", "-1"], "--burn-in"),
+        (vec!["--bundle-resolution", "0"], "--bundle-resolution 0: expected 1 to 16384"),
+        (vec!["--bundle-resolution", "-5"], "expected a number of pixels or \"auto\", got \"-5\""),
+        (vec!["--bundle-resolution", "fine"], "expected a number of pixels or \"auto\""),
         (vec!["--camera", "side"], "--camera side: the scene has no camera \"side\"; its cameras are \"camera\""),
     ] {
         let err = refused_render(&scratch, &[&[cb.as_str()], &args[..]].concat(), "x.exr");
