@@ -3,7 +3,7 @@
 //! `StepRng(seed, k)`, so the state between steps is only J_j, win_j and the image sum.
 
 use crate::gpu::profile::Stage;
-use crate::gpu::scene_buffers::{OUTGOING, SceneBuffers, TRANSFER_SUMS};
+use crate::gpu::scene_buffers::{OUTGOING, Paged, SceneBuffers, TRANSFER_SUMS};
 use crate::gpu::{Context, buffers};
 use crate::layout::GpuBundle;
 use crate::rng::StepRng;
@@ -150,6 +150,28 @@ pub fn auto_bundle_resolution(patches: &Patches, radius: f64, views: &[crate::sc
     r.clamp(AUTO_BUNDLE_MIN, AUTO_BUNDLE_MAX)
 }
 
+/// The last burn-in steps run at the full bundle resolution (`coarse_burn_in`).
+pub const FINE_BURN_IN_STEPS: u32 = 8;
+/// The coarse burn-in's bundle resolution is the full one divided by this.
+pub const COARSE_BURN_IN_DIVISOR: u32 = 2;
+/// Below this the coarse grid saves too little to be worth a second set of line buffers.
+pub const COARSE_BURN_IN_MIN: u32 = 32;
+
+/// The coarse start of the burn-in: `Some((resolution, steps))` when the first `steps` of a
+/// burn-in of `burn_in` steps run at the smaller bundle `resolution`, a quarter of the
+/// lines and fragments. The burn-in only has to bring the state's mean near the fixed
+/// point, and that mean does not depend on the resolution: each step is an unbiased
+/// estimate of the transport of the state before it (random direction, rotation and
+/// shift), so E[J_k] = T^k whatever the grid. What the coarse grid adds is variance
+/// (fewer lines cross each patch); the last `FINE_BURN_IN_STEPS` steps at the full grid let
+/// it decay (each bounce attenuates it by about the albedo squared) before the first image
+/// step.
+pub fn coarse_burn_in(resolution: u32, burn_in: u32) -> Option<(u32, u32)> {
+    let coarse = resolution / COARSE_BURN_IN_DIVISOR;
+    let steps = burn_in.saturating_sub(FINE_BURN_IN_STEPS);
+    (coarse >= COARSE_BURN_IN_MIN && steps > 0).then_some((coarse, steps))
+}
+
 /// Bytes of the largest per-line buffers of a step (counts and offsets: a u32 per line of
 /// the projection, and the total).
 pub fn line_table_bytes(resolution: u32) -> u64 {
@@ -201,11 +223,51 @@ pub struct Iteration {
     pub capacity: u32,
     pub resolution: u32,
     pub gather: GatherBuffers,
-    _owned: Vec<wgpu::Buffer>,
+    arrays: StepArrays,
+    _fragments: wgpu::Buffer,
+}
+
+/// The per-patch arrays of a step: written and read within it, so an iteration at another
+/// bundle resolution (the coarse burn-in, a regrown fragment list) shares them.
+#[derive(Clone)]
+struct StepArrays {
+    /// O_j, what each patch sends into this step's bundle.
+    outgoing: Paged,
+    image_outgoing: Paged,
+    image_mean_radiance: Paged,
+    /// The transfer's fixed-point sums.
+    sums: Paged,
 }
 
 impl Iteration {
     pub fn new(ctx: &Context, scene: &SceneBuffers, resolution: u32, capacity: u64) -> Result<Self> {
+        let device = &ctx.device;
+        let n = scene.patch_count as u64;
+        let none = wgpu::BufferUsages::empty();
+        let (pages, zeroed) = (scene.page_bytes, Paged::zeroed);
+        let arrays = StepArrays {
+            outgoing: zeroed(device, "firstshot.iteration.outgoing", OUTGOING, n, pages, none),
+            image_outgoing: zeroed(device, "firstshot.iteration.image_outgoing", OUTGOING, n, pages, none),
+            image_mean_radiance: zeroed(device, "firstshot.iteration.image_mean_radiance", OUTGOING, n, pages, none),
+            sums: zeroed(device, "firstshot.iteration.sums", TRANSFER_SUMS, n, pages, none),
+        };
+        Self::with_arrays(ctx, scene, arrays, resolution, capacity)
+    }
+
+    /// An iteration at `resolution` with room for `capacity` fragments that shares this
+    /// one's per-patch arrays: the coarse burn-in (`coarse_burn_in`), or this resolution
+    /// with a larger fragment list after an overflow.
+    pub fn resized(&self, ctx: &Context, scene: &SceneBuffers, resolution: u32, capacity: u64) -> Result<Self> {
+        Self::with_arrays(ctx, scene, self.arrays.clone(), resolution, capacity)
+    }
+
+    fn with_arrays(
+        ctx: &Context,
+        scene: &SceneBuffers,
+        arrays: StepArrays,
+        resolution: u32,
+        capacity: u64,
+    ) -> Result<Self> {
         let device = &ctx.device;
         let limits = ctx.limits();
         // The resolution and the line table were checked by `render::check_limits`; the
@@ -218,7 +280,6 @@ impl Iteration {
             )));
         }
         let lines = resolution * resolution;
-        let n = scene.patch_count as u64;
         let none = wgpu::BufferUsages::empty();
         let bundle = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("firstshot.iteration.bundle"),
@@ -226,10 +287,7 @@ impl Iteration {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let (pages, paged) = (scene.page_bytes, crate::gpu::scene_buffers::Paged::zeroed);
-        let outgoing = paged(device, "firstshot.iteration.outgoing", OUTGOING, n, pages, none);
-        let image_outgoing = paged(device, "firstshot.iteration.image_outgoing", OUTGOING, n, pages, none);
-        let image_mean_radiance = paged(device, "firstshot.iteration.image_mean_radiance", OUTGOING, n, pages, none);
+        let StepArrays { outgoing, image_outgoing, image_mean_radiance, sums } = &arrays;
         let max_bits = buffers::storage_zeroed(device, "firstshot.iteration.max_bits", 16, none);
         let counts = buffers::storage_zeroed(device, "firstshot.iteration.counts", 4 * (lines as u64 + 1), none);
         // COPY_SRC: `fragments` reads its last entry back.
@@ -242,16 +300,15 @@ impl Iteration {
         let cursor = buffers::storage_zeroed(device, "firstshot.iteration.cursor", 4 * lines as u64, none);
         let fragments = buffers::storage_zeroed(device, "firstshot.iteration.fragments", 8 * capacity.max(1), none);
         let overflow = buffers::storage_zeroed(device, "firstshot.iteration.overflow", 4, wgpu::BufferUsages::COPY_SRC);
-        let sums = paged(device, "firstshot.iteration.sums", TRANSFER_SUMS, n, pages, none);
         Ok(Iteration {
             reflect: BundleReflect::new(
                 device,
                 scene,
                 &bundle,
-                &outgoing,
+                outgoing,
                 &max_bits,
-                &image_outgoing,
-                &image_mean_radiance,
+                image_outgoing,
+                image_mean_radiance,
             ),
             visibility: BundleVisibility::new(
                 device,
@@ -303,17 +360,11 @@ impl Iteration {
             cursor,
             max_bits,
             overflow,
-            offsets: offsets.clone(),
+            offsets,
             capacity: capacity as u32,
             resolution,
-            _owned: [
-                outgoing.pages,
-                image_outgoing.pages,
-                image_mean_radiance.pages,
-                vec![offsets, fragments],
-                sums.pages,
-            ]
-            .concat(),
+            arrays,
+            _fragments: fragments,
         })
     }
 

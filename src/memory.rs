@@ -52,9 +52,10 @@ pub struct MemoryPlan {
     pub pixels: u64,
     pub device_bytes_per_pixel: u64,
     pub host_bytes_per_pixel: u64,
-    /// Bundle lines (resolution squared; 0 without an iteration).
+    /// Bundle lines (resolution squared, plus the coarse burn-in's; 0 without an iteration).
     pub lines: u64,
-    /// Fragments the list is first sized for (it grows if a step needs more).
+    /// Fragments the lists are first sized for, the coarse burn-in's included (each grows if a
+    /// step needs more).
     pub fragments: u64,
     pub bytes_per_fragment: u64,
     /// First-shot pairs the list is first sized for (it grows if the first shot finds more).
@@ -116,8 +117,15 @@ pub fn predict(
             let resolution = options.bundle_resolution_for(scene, patches);
             let r = resolution as u64;
             let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
-            let bound = crate::iteration::fragment_bound(patches, radius, resolution);
-            (r * r, options.bundle_capacity.unwrap_or_else(|| initial_fragment_capacity(limits, bound)))
+            let capacity = |resolution: u32| {
+                let bound = crate::iteration::fragment_bound(patches, radius, resolution);
+                options.bundle_capacity.unwrap_or_else(|| initial_fragment_capacity(limits, bound))
+            };
+            // The coarse burn-in's lines and fragments live beside the full grid's while it runs.
+            let burn_in = crate::render::burn_in_steps(scene, options);
+            let (coarse_lines, coarse_fragments) = crate::iteration::coarse_burn_in(resolution, burn_in)
+                .map_or((0, 0), |(c, _)| (c as u64 * c as u64, capacity(c)));
+            (r * r + coarse_lines, capacity(resolution) + coarse_fragments)
         }
     };
     let first_shot_pairs = match options.first_shot {

@@ -202,6 +202,10 @@ pub struct RenderStats {
     pub iterations: u32,
     /// Steps before them that only advanced the state.
     pub burn_in_steps: u32,
+    /// The first of those, run at the coarser bundle resolution
+    /// (`iteration::coarse_burn_in`; 0 and `None` when there was none).
+    pub coarse_burn_in_steps: u32,
+    pub coarse_bundle_resolution: Option<u32>,
     pub seed: u64,
     pub tessellation_ms: f64,
     pub upload_ms: f64,
@@ -606,6 +610,12 @@ pub struct Renderer<'a> {
     views: Vec<ViewImage>,
     /// The bundle stages; `None` for a first-shot-only image (`iterations == 0`).
     iteration: Option<Iteration>,
+    /// The coarse burn-in (`iteration::coarse_burn_in`): the iteration at the smaller
+    /// resolution, sharing the per-patch arrays, and the steps it runs (0..steps); dropped
+    /// once they are done.
+    coarse: Option<(Iteration, u32)>,
+    /// Its resolution and steps, kept for the statistics.
+    coarse_plan: Option<(u32, u32)>,
     /// Steps before the first one averaged into the image.
     burn_in: u32,
     /// The step whose estimate is the image's first: the burn-in, or a frame's first step
@@ -674,6 +684,18 @@ impl<'a> Renderer<'a> {
             };
             Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity)?)
         };
+        let burn_in = burn_in_steps(scene, options);
+        let coarse_plan = crate::iteration::coarse_burn_in(bundle_resolution, burn_in).filter(|_| iteration.is_some());
+        let coarse = match (&iteration, coarse_plan) {
+            (Some(full), Some((resolution, steps))) => {
+                let bound = fragment_bound(patches, buffers.radius, resolution);
+                let capacity = options
+                    .bundle_capacity
+                    .unwrap_or_else(|| crate::memory::initial_fragment_capacity(&ctx.limits(), bound));
+                Some((full.resized(ctx, &buffers, resolution, capacity)?, steps))
+            }
+            _ => None,
+        };
         let gathers = iteration.is_some();
         let views = options
             .views(scene)
@@ -689,7 +711,6 @@ impl<'a> Renderer<'a> {
                 ViewImage { name, camera, item_buffer, estimate }
             })
             .collect();
-        let burn_in = burn_in_steps(scene, options);
         Ok(Renderer {
             ctx,
             scene,
@@ -700,6 +721,8 @@ impl<'a> Renderer<'a> {
             direct,
             views,
             iteration,
+            coarse,
+            coarse_plan,
             burn_in,
             image_start: burn_in,
             direct_due: true,
@@ -723,6 +746,14 @@ impl<'a> Renderer<'a> {
 
     fn iteration(&self) -> &Iteration {
         self.iteration.as_ref().expect("a Renderer built with iterations > 0")
+    }
+
+    /// The iteration that runs step `k`: the coarse one for the first steps of the burn-in.
+    fn iteration_at(&self, k: u32) -> &Iteration {
+        match &self.coarse {
+            Some((coarse, steps)) if k < *steps => coarse,
+            _ => self.iteration(),
+        }
     }
 
     /// Fragment capacity of a bundle step and the bundle resolution.
@@ -753,7 +784,7 @@ impl<'a> Renderer<'a> {
         let queue = &self.ctx.queue;
         let image_step = k >= self.image_start;
         let mut rng =
-            self.iteration().write_bundle(queue, self.options.seed, k as u64, image_step, &self.bundle_scene());
+            self.iteration_at(k).write_bundle(queue, self.options.seed, k as u64, image_step, &self.bundle_scene());
         if image_step {
             let jitter = [rng.uniform() as f32, rng.uniform() as f32];
             self.write_camera(jitter);
@@ -815,7 +846,7 @@ impl<'a> Renderer<'a> {
     /// The stages of step `k`, in order (its uniforms written by `write_step`): the bundle
     /// stages of the iteration, then, past the burn-in, the image stages.
     pub fn step_stages(&self, k: u32) -> Vec<Stage<'_>> {
-        let mut stages = self.iteration().stages(&self.buffers);
+        let mut stages = self.iteration_at(k).stages(&self.buffers);
         if k >= self.image_start {
             stages.extend(self.image_stages(self.direct_due, true));
         }
@@ -888,13 +919,42 @@ impl<'a> Renderer<'a> {
 
     /// Whether a step since the last `clear_overflow` ran out of fragment room.
     pub fn overflowed(&self) -> Result<bool> {
-        self.iteration().overflowed(self.ctx)
+        Ok(self.iteration().overflowed(self.ctx)? || self.coarse_overflowed()?)
+    }
+
+    fn coarse_overflowed(&self) -> Result<bool> {
+        self.coarse.as_ref().map_or(Ok(false), |(coarse, _)| coarse.overflowed(self.ctx))
     }
 
     pub fn clear_overflow(&self) {
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         self.iteration().clear_overflow(&mut encoder);
+        if let Some((coarse, _)) = &self.coarse {
+            coarse.clear_overflow(&mut encoder);
+        }
         self.ctx.queue.submit([encoder.finish()]);
+    }
+
+    /// After an overflow: each iteration whose fragment list ran out of room gets one of
+    /// twice the size (sharing the per-patch arrays, so the state is untouched).
+    fn regrow(&mut self) -> Result<()> {
+        let (ctx, device) = (self.ctx, &self.ctx.device);
+        if let Some((coarse, steps)) = &self.coarse
+            && coarse.overflowed(ctx)?
+        {
+            let capacity = (coarse.capacity as u64).saturating_mul(2);
+            self.coarse = Some((coarse.resized(ctx, &self.buffers, coarse.resolution, capacity)?, *steps));
+        }
+        let full = self.iteration();
+        if full.overflowed(ctx)? {
+            let capacity = (full.capacity as u64).saturating_mul(2);
+            let iteration = full.resized(ctx, &self.buffers, full.resolution, capacity)?;
+            for view in &mut self.views {
+                view.estimate.rebind_gather(device, &iteration.gather);
+            }
+            self.iteration = Some(iteration);
+        }
+        Ok(())
     }
 
     /// The iteration state (J_j, win_j of every patch) as bytes.
@@ -983,6 +1043,8 @@ impl<'a> Renderer<'a> {
                 iteration_ms: iteration_stats.ms,
                 iterations: iteration_stats.steps.saturating_sub(self.burn_in),
                 burn_in_steps: iteration_stats.steps.min(self.burn_in),
+                coarse_burn_in_steps: self.coarse_plan.map_or(0, |(_, steps)| iteration_stats.steps.min(steps)),
+                coarse_bundle_resolution: self.coarse_plan.map(|(resolution, _)| resolution),
                 seed: o.seed,
                 tessellation_ms: 0.0,
                 upload_ms: self.upload_ms,
@@ -1154,18 +1216,16 @@ impl<'a> Renderer<'a> {
                 // A line held more surfaces than the list had room for: restore the batch's
                 // start and redo it with twice the room.
                 copy_all(false);
-                let (capacity, resolution) = self.bundle_size();
-                let capacity = (capacity as u64).saturating_mul(2);
-                let iteration = Iteration::new(ctx, &self.buffers, resolution, capacity)?;
-                for view in &mut self.views {
-                    view.estimate.rebind_gather(device, &iteration.gather);
-                }
-                self.iteration = Some(iteration);
+                self.regrow()?;
                 interrupted = false;
                 continue;
             }
             batch_ms.push(batch_start.elapsed().as_secs_f64() * 1e3 / batch as f64);
             step += batch;
+            if self.coarse.as_ref().is_some_and(|(_, steps)| step >= *steps) {
+                // Its steps are done: give its lines and fragments back.
+                self.coarse = None;
+            }
             hooks.progress(step, total);
             if step > self.image_start && hooks.checkpoint_due() {
                 let (checkpoint, images) = self.checkpoint(step)?;

@@ -171,10 +171,13 @@ fn test04_fragment_overflow_is_detected_and_redone_exactly() {
     let run = |capacity: Option<u64>| {
         let mut o = options(&scene, 20, 3);
         o.bundle_capacity = capacity;
+        // A coarse start (12 steps at 32): its own list overflows and grows too.
+        o.burn_in = Some(20);
         render(&ctx, &scene, &patches, &o).unwrap()
     };
     let (normal, tight) = (run(None), run(Some(16)));
     assert!(tight.stats.bundle_capacity > 16, "the list must have grown");
+    assert_eq!(tight.stats.coarse_burn_in_steps, 12);
     let bits = |i: &firstshot::image::Image| i.pixels.iter().flat_map(|p| p.map(f32::to_bits)).collect::<Vec<u32>>();
     assert_eq!(bits(&normal.image), bits(&tight.image), "redone steps must give exactly the image of a run with room");
 }
@@ -323,4 +326,64 @@ fn test07_the_automatic_bundle_resolution_follows_the_patches_and_the_image() {
     // Patches far too small for any grid: the largest the rule takes by itself.
     let tiny = common::patches_of(&grid(1e-4), vec![]);
     assert_eq!(auto_bundle_resolution(&tiny, radius, &[]), AUTO_BUNDLE_MAX);
+}
+
+#[test]
+fn test08_the_coarse_burn_in_keeps_the_expected_state() {
+    // The first burn-in steps run at half the bundle resolution (iteration::coarse_burn_in):
+    // fewer lines, the same expectation. In a closed furnace every patch's expected outgoing
+    // radiance after step k is the truncated series O(k) = Le (1 - a^(k+1)) / (1 - a)
+    // whatever the grid, and what a patch receives in step k carries the projected-area
+    // share |n . d| of mean 1/2: E[K_j] = O(k - 1) / 2. The state is read right after the
+    // coarse steps, before any full-resolution step could hide an error of theirs.
+    use firstshot::render::{NoHooks, Renderer};
+    let Some(ctx) = gpu() else { return };
+    // Albedo 0.7: the state's variance stays small (at 0.9 its distribution has a long tail,
+    // and a mean over a few seeds sits low, at the full resolution as at the coarse one).
+    // A coarse step that scaled J by 1 + e would move the fixed point by about 2.3 e.
+    let (albedo, le) = (0.7f64, 1.0f64);
+    let (scene, patches) = furnace(albedo as f32, le as f32);
+    let o = |k: u32| le * (1.0 - albedo.powi(k as i32 + 1)) / (1.0 - albedo);
+    let burn_in = 30;
+    let (coarse, steps) = firstshot::iteration::coarse_burn_in(64, burn_in).expect("a coarse start at 64");
+    assert_eq!((coarse, steps), (32, burn_in - firstshot::iteration::FINE_BURN_IN_STEPS));
+    let area: f64 = patches.patches.iter().map(|p| p.area).sum();
+    let state_bytes = std::mem::size_of::<firstshot::layout::GpuPatchState>();
+    let mut means = Vec::new();
+    for seed in 1..=16 {
+        let mut opts = options(&scene, 8, seed);
+        opts.burn_in = Some(burn_in);
+        let mut renderer = Renderer::new(&ctx, &scene, &patches, &opts, &mut NoHooks).unwrap();
+        assert_eq!(renderer.advance_to(0, steps, &mut NoHooks).unwrap(), steps);
+        let state = renderer.read_state().unwrap();
+        let k_mean: f64 = patches
+            .patches
+            .iter()
+            .enumerate()
+            .map(|(j, p)| {
+                let s: &firstshot::layout::GpuPatchState =
+                    bytemuck::from_bytes(&state[j * state_bytes..(j + 1) * state_bytes]);
+                p.area * s.diffuse[0] as f64
+            })
+            .sum::<f64>()
+            / area;
+        means.push(k_mean);
+    }
+    let mean = means.iter().sum::<f64>() / means.len() as f64;
+    let spread = (means.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (means.len() - 1) as f64).sqrt();
+    let exact = o(steps - 1) / 2.0;
+    eprintln!(
+        "after {steps} coarse steps: mean K {mean:.4} (seeds {means:?}, spread {spread:.4}), exact {exact:.4}; converged {:.4}",
+        o(1000) / 2.0
+    );
+    // Three standard errors of the seeds' mean, which must be tight enough to matter.
+    let tolerance = 3.0 * spread / (means.len() as f64).sqrt();
+    assert!(tolerance < 0.03 * exact, "too noisy to tell: tolerance {tolerance}");
+    assert!((mean - exact).abs() < tolerance, "mean K {mean} against {exact} (tolerance {tolerance})");
+    // The whole run reports its coarse start.
+    let mut opts = options(&scene, 2, 1);
+    opts.burn_in = Some(burn_in);
+    let done = render(&ctx, &scene, &patches, &opts).unwrap();
+    assert_eq!((done.stats.coarse_bundle_resolution, done.stats.coarse_burn_in_steps), (Some(coarse), steps));
+    assert_eq!(done.stats.burn_in_steps, burn_in);
 }

@@ -63,6 +63,8 @@ pub fn page_bytes(limits: &wgpu::Limits, limit: Option<u64>) -> u64 {
 }
 
 /// The buffers of one paged per-patch array (`PerPatch`), in order; all but the last full.
+/// A clone shares the buffers.
+#[derive(Clone)]
 pub struct Paged {
     pub pages: Vec<wgpu::Buffer>,
     /// Bytes of the whole array.
