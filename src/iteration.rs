@@ -5,14 +5,13 @@
 use crate::gpu::profile::Stage;
 use crate::gpu::scene_buffers::{OUTGOING, Paged, SceneBuffers, TRANSFER_SUMS};
 use crate::gpu::{Context, buffers};
-use crate::layout::GpuBundle;
+use crate::layout::{GpuBundle, LINE_BUCKET};
 use crate::rng::StepRng;
 use crate::scene::Patches;
 use crate::stages::bundle_finalize::BundleFinalize;
 use crate::stages::bundle_reflect::BundleReflect;
 use crate::stages::bundle_transfer::BundleTransfer;
 use crate::stages::bundle_visibility::BundleVisibility;
-use crate::stages::prefix_sum::PrefixSum;
 use crate::{Error, Result};
 use glam::DVec3;
 
@@ -172,10 +171,18 @@ pub fn coarse_burn_in(resolution: u32, burn_in: u32) -> Option<(u32, u32)> {
     (coarse >= COARSE_BURN_IN_MIN && steps > 0).then_some((coarse, steps))
 }
 
-/// Bytes of the largest per-line buffers of a step (counts and offsets: a u32 per line of
-/// the projection, and the total).
+/// Bytes of the lines' buckets in a step's fragment list (`LINE_BUCKET` slots of 8 bytes a
+/// line), which one binding must hold with room to spare for the long lines' slices.
 pub fn line_table_bytes(resolution: u32) -> u64 {
-    4 * (resolution as u64 * resolution as u64 + 1)
+    8 * LINE_BUCKET as u64 * resolution as u64 * resolution as u64
+}
+
+/// The largest capacity (fragments past the lines' buckets) a device holds at `resolution`:
+/// the spill list (16 bytes a node) and the fragment list (the buckets, then as many
+/// fragments of long lines) each in one binding.
+pub fn max_capacity(limits: &wgpu::Limits, resolution: u32) -> u64 {
+    let largest = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    (largest / 16).min((largest.saturating_sub(line_table_bytes(resolution))) / 8)
 }
 
 /// Fragments a step can produce at most: a triangle's projection holds at most
@@ -199,7 +206,10 @@ pub fn fragment_bound(patches: &Patches, radius: f64, resolution: u32) -> u64 {
 /// `bundle_reflect`).
 pub struct GatherBuffers {
     pub bundle: wgpu::Buffer,
-    pub offsets: wgpu::Buffer,
+    /// Surfaces per line, and (begin, end) of each longer line's slice of `fragments`
+    /// (bundle_transfer); a line of at most `LINE_BUCKET` is its bucket.
+    pub counts: wgpu::Buffer,
+    pub slices: wgpu::Buffer,
     pub fragments: wgpu::Buffer,
     /// Its pages (`scene_buffers::OUTGOING`).
     pub image_outgoing: Vec<wgpu::Buffer>,
@@ -211,20 +221,19 @@ pub struct GatherBuffers {
 pub struct Iteration {
     bundle: wgpu::Buffer,
     counts: wgpu::Buffer,
-    cursor: wgpu::Buffer,
+    heads: wgpu::Buffer,
+    tally: wgpu::Buffer,
     max_bits: wgpu::Buffer,
     overflow: wgpu::Buffer,
-    offsets: wgpu::Buffer,
     reflect: BundleReflect,
     visibility: BundleVisibility,
-    scan: PrefixSum,
     transfer: BundleTransfer,
     finalize: BundleFinalize,
     pub capacity: u32,
     pub resolution: u32,
     pub gather: GatherBuffers,
     arrays: StepArrays,
-    _fragments: wgpu::Buffer,
+    _owned: [wgpu::Buffer; 3],
 }
 
 /// The per-patch arrays of a step: written and read within it, so an iteration at another
@@ -272,14 +281,13 @@ impl Iteration {
         let limits = ctx.limits();
         // The resolution and the line table were checked by `render::check_limits`; the
         // capacity grows at run time (overflow and redo), so it is checked here.
-        let largest = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-        let max = largest / 8;
+        let lines = resolution * resolution;
+        let max = max_capacity(&limits, resolution);
         if capacity > max {
             return Err(Error::Limits(format!(
-                "a bundle step may need {capacity} fragments, more than one buffer of this device holds ({max}); use a smaller --bundle-resolution or a larger --patch-size"
+                "a bundle step may need {capacity} fragments past its lines' buckets, more than one buffer of this device holds ({max}); use a smaller --bundle-resolution or a larger --patch-size"
             )));
         }
-        let lines = resolution * resolution;
         let none = wgpu::BufferUsages::empty();
         let bundle = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("firstshot.iteration.bundle"),
@@ -289,16 +297,24 @@ impl Iteration {
         });
         let StepArrays { outgoing, image_outgoing, image_mean_radiance, sums } = &arrays;
         let max_bits = buffers::storage_zeroed(device, "firstshot.iteration.max_bits", 16, none);
-        let counts = buffers::storage_zeroed(device, "firstshot.iteration.counts", 4 * (lines as u64 + 1), none);
-        // COPY_SRC: `fragments` reads its last entry back.
-        let offsets = buffers::storage_zeroed(
+        // COPY_SRC: `fragments` sums the counts on the host.
+        let counts = buffers::storage_zeroed(
             device,
-            "firstshot.iteration.offsets",
-            4 * (lines as u64 + 1),
+            "firstshot.iteration.counts",
+            4 * lines as u64,
             wgpu::BufferUsages::COPY_SRC,
         );
-        let cursor = buffers::storage_zeroed(device, "firstshot.iteration.cursor", 4 * lines as u64, none);
-        let fragments = buffers::storage_zeroed(device, "firstshot.iteration.fragments", 8 * capacity.max(1), none);
+        let heads = buffers::storage_zeroed(device, "firstshot.iteration.heads", 4 * lines as u64, none);
+        let slices = buffers::storage_zeroed(device, "firstshot.iteration.slices", 8 * lines as u64, none);
+        let fragments = buffers::storage_zeroed(
+            device,
+            "firstshot.iteration.fragments",
+            8 * (lines as u64 * LINE_BUCKET as u64 + capacity.max(1)),
+            none,
+        );
+        let spill = buffers::storage_zeroed(device, "firstshot.iteration.spill", 16 * capacity.max(1), none);
+        let long_lines = buffers::storage_zeroed(device, "firstshot.iteration.long_lines", 4 * capacity.max(1), none);
+        let tally = buffers::storage_zeroed(device, "firstshot.iteration.tally", 16, wgpu::BufferUsages::COPY_SRC);
         let overflow = buffers::storage_zeroed(device, "firstshot.iteration.overflow", 4, wgpu::BufferUsages::COPY_SRC);
         Ok(Iteration {
             reflect: BundleReflect::new(
@@ -315,21 +331,28 @@ impl Iteration {
                 [
                     (&bundle).into(),
                     (&counts).into(),
-                    (&offsets).into(),
-                    (&cursor).into(),
+                    (&heads).into(),
                     (&fragments).into(),
+                    (&spill).into(),
+                    (&tally).into(),
                     (&overflow).into(),
+                    (&long_lines).into(),
                     outgoing.resource(),
                 ],
                 resolution,
             ),
-            scan: PrefixSum::new(device, lines + 1, &counts, &offsets),
             transfer: BundleTransfer::new(
                 device,
                 [
                     (&bundle).into(),
-                    (&offsets).into(),
+                    (&counts).into(),
+                    (&heads).into(),
                     (&fragments).into(),
+                    (&spill).into(),
+                    (&tally).into(),
+                    (&overflow).into(),
+                    (&slices).into(),
+                    (&long_lines).into(),
                     outgoing.resource(),
                     sums.resource(),
                     (&max_bits).into(),
@@ -350,21 +373,22 @@ impl Iteration {
             ),
             gather: GatherBuffers {
                 bundle: bundle.clone(),
-                offsets: offsets.clone(),
+                counts: counts.clone(),
+                slices,
                 fragments: fragments.clone(),
                 image_outgoing: image_outgoing.pages.clone(),
                 image_mean_radiance: image_mean_radiance.pages.clone(),
             },
             bundle,
             counts,
-            cursor,
+            heads,
+            tally,
             max_bits,
             overflow,
-            offsets,
             capacity: capacity as u32,
             resolution,
             arrays,
-            _fragments: fragments,
+            _owned: [fragments, spill, long_lines],
         })
     }
 
@@ -393,21 +417,15 @@ impl Iteration {
                 Box::new(move |e: &mut wgpu::CommandEncoder| {
                     e.clear_buffer(&self.max_bits, 0, None);
                     e.clear_buffer(&self.counts, 0, None);
-                    e.clear_buffer(&self.cursor, 0, None);
+                    e.clear_buffer(&self.heads, 0, None);
+                    e.clear_buffer(&self.tally, 0, None);
                 }),
             ),
             ("reflect", Box::new(move |e: &mut wgpu::CommandEncoder| self.reflect.record(e))),
             (
-                "count",
+                "visibility",
                 Box::new(move |e: &mut wgpu::CommandEncoder| {
-                    self.visibility.record_count(e, &scene.vertices, scene.patch_count)
-                }),
-            ),
-            ("prefix_sum", Box::new(move |e: &mut wgpu::CommandEncoder| self.scan.record(e))),
-            (
-                "fill",
-                Box::new(move |e: &mut wgpu::CommandEncoder| {
-                    self.visibility.record_fill(e, &scene.vertices, scene.patch_count)
+                    self.visibility.record(e, &scene.vertices, scene.patch_count)
                 }),
             ),
             ("transfer", Box::new(move |e: &mut wgpu::CommandEncoder| self.transfer.record(e))),
@@ -415,10 +433,16 @@ impl Iteration {
         ]
     }
 
-    /// Fragments (surfaces on lines) of the last step: the last prefix sum of the counts.
+    /// Fragments (surfaces on lines) of the last step: the sum of its lines' counts.
     pub fn fragments(&self, ctx: &Context) -> Result<u64> {
-        let lines = self.resolution as u64 * self.resolution as u64;
-        Ok(buffers::read_back_at::<u32>(&ctx.device, &ctx.queue, &self.offsets, 4 * lines, 4)?[0] as u64)
+        let counts = buffers::read_back::<u32>(&ctx.device, &ctx.queue, &self.counts, self.counts.size())?;
+        Ok(counts.iter().map(|&c| c as u64).sum())
+    }
+
+    /// The last step's spill nodes and long-line fragments (`tally`).
+    pub fn tally(&self, ctx: &Context) -> Result<[u32; 2]> {
+        let t = buffers::read_back::<u32>(&ctx.device, &ctx.queue, &self.tally, 8)?;
+        Ok([t[0], t[1]])
     }
 
     /// Whether any step since the last `clear_overflow` ran out of fragment room.

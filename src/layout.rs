@@ -20,6 +20,19 @@ pub const VERTEX_TWIN_BIT: u32 = 1 << 31;
 pub const FIXED_POINT_SCALE: f32 = 2147483648.0;
 /// Bundle fragments carry their patch's facing (front toward +d) in the top bit of the id.
 pub const FRAGMENT_FRONT_BIT: u32 = 1 << 31;
+/// Fragment slots each bundle line owns (`wgsl/bundle_visibility.wgsl`): a line's first
+/// surfaces go there in one pass; the rest spill into a list chained per line. 8 slots of
+/// 8 bytes are one 64-byte cache line.
+pub const LINE_BUCKET: u32 = 8;
+/// Entries of the bundle's `tally` (u32 counters, cleared every step): spill nodes taken and
+/// lines listed as long by bundle_visibility, fragments of the long lines' slices taken by
+/// bundle_transfer.
+pub const TALLY_SPILLED: u32 = 0;
+pub const TALLY_LONG: u32 = 1;
+pub const TALLY_LONG_LINES: u32 = 2;
+/// Workgroups (of 64) of bundle_transfer's `gather_long_lines`, which stride over the list of
+/// long lines: a fixed grid, since the list's length is known only on the GPU.
+pub const LONG_LINES_WORKGROUPS: u32 = 64;
 /// Prefix sums: invocations per workgroup, and values each scans in a run of its own (long
 /// runs keep the barrier-bound workgroup scan a small share of the work on CPU adapters).
 pub const PREFIX_SUM_WORKGROUP: u32 = 256;
@@ -253,7 +266,8 @@ pub struct GpuBundle {
     /// Pixels along each edge of the grid.
     pub resolution: u32,
     pub patch_count: u32,
-    /// Capacity of the fragment list.
+    /// Capacity of the spill list and of the long lines' slices (fragments past the lines'
+    /// buckets).
     pub capacity: u32,
     /// 1 once the iteration state holds J (after step 1).
     pub use_state: u32,
@@ -324,6 +338,11 @@ pub fn wgsl_constants() -> String {
          const NO_PATCH: u32 = {NO_PATCH}u;\n\
          const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
+         const LINE_BUCKET: u32 = {LINE_BUCKET}u;\n\
+         const TALLY_SPILLED: u32 = {TALLY_SPILLED}u;\n\
+         const TALLY_LONG: u32 = {TALLY_LONG}u;\n\
+         const TALLY_LONG_LINES: u32 = {TALLY_LONG_LINES}u;\n\
+         const LONG_LINES_WORKGROUPS: u32 = {LONG_LINES_WORKGROUPS}u;\n\
          const LIGHT_POINT: u32 = {LIGHT_POINT}u;\n\
          const LIGHT_AREA: u32 = {LIGHT_AREA}u;\n\
          const LIGHT_SPOT: u32 = {LIGHT_SPOT}u;\n\

@@ -25,10 +25,12 @@ const OTHER_DEVICE_BYTES_PER_PATCH: u64 = 3 * size_of::<RasterVertex>() as u64
 const FIRST_SHOT_BYTES_PER_PATCH: u64 = 20;
 /// GPU bytes per first-shot pair: the list (vec4<u32>) and the table's entry (vec2<u32>).
 const BYTES_PER_PAIR: u64 = 16 + 8;
-/// GPU bytes per bundle line: counts, offsets and cursors (u32 each).
-const BYTES_PER_LINE: u64 = 12;
-/// GPU bytes per fragment of the bundle's fragment list (depth bits, patch).
-const BYTES_PER_FRAGMENT: u64 = 8;
+/// GPU bytes per bundle line: its count and spill head (u32 each), its slice (2 u32) and its
+/// bucket of `LINE_BUCKET` fragments.
+const BYTES_PER_LINE: u64 = 16 + 8 * crate::layout::LINE_BUCKET as u64;
+/// GPU bytes per fragment past the lines' buckets (the capacity): a spill node (16), a place
+/// in a long line's slice (depth bits, patch: 8) and in the list of long lines (4).
+const BYTES_PER_FRAGMENT: u64 = 28;
 /// GPU bytes per pixel of a view: the image sum (two halves of vec4<f32>) and its copy kept
 /// to redo a batch, and the camera item buffer (patch id and depth, 4 bytes each).
 const DEVICE_BYTES_PER_PIXEL: u64 = 2 * 32 + 8;
@@ -78,10 +80,15 @@ pub struct MemoryPlan {
     pub peak_rss_bytes: Option<u64>,
 }
 
-/// The first capacity of the fragment list: the geometric bound, at most what one binding
-/// holds (more fragments than that in one step are refused when a step finds them).
-pub fn initial_fragment_capacity(limits: &wgpu::Limits, bound: u64) -> u64 {
-    bound.min(limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / BYTES_PER_FRAGMENT)
+/// The first capacity for the fragments past the lines' buckets (the spill list and the long
+/// lines' slices): an eighth of the lines (at least 1024), at most the geometric bound of
+/// all fragments and what one binding holds. A step that needs more has its batch redone
+/// with twice the room (`render`); more than a binding holds is refused then. (The bundled
+/// scenes spill a few thousand fragments a step: Sierpinski at 704, 0.5 M fragments on
+/// 0.5 M lines, at most 9 000 of them in long lines.)
+pub fn initial_fragment_capacity(limits: &wgpu::Limits, resolution: u32, bound: u64) -> u64 {
+    let lines = resolution as u64 * resolution as u64;
+    bound.min((lines / 8).max(1024)).min(crate::iteration::max_capacity(limits, resolution))
 }
 
 /// The most first-shot pairs a device holds, the list in pages of at most `page_bytes`
@@ -119,7 +126,7 @@ pub fn predict(
             let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
             let capacity = |resolution: u32| {
                 let bound = crate::iteration::fragment_bound(patches, radius, resolution);
-                options.bundle_capacity.unwrap_or_else(|| initial_fragment_capacity(limits, bound))
+                options.bundle_capacity.unwrap_or_else(|| initial_fragment_capacity(limits, resolution, bound))
             };
             // The coarse burn-in's lines and fragments live beside the full grid's while it runs.
             let burn_in = crate::render::burn_in_steps(scene, options);

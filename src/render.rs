@@ -75,8 +75,9 @@ pub struct RenderOptions {
     /// Refuse a run predicted to need more host memory than this many bytes (`memory`);
     /// `None`: what the host has available (`MemAvailable`).
     pub memory_limit: Option<u64>,
-    /// Initial fragment room of a bundle step; `None` takes the geometric bound, which no
-    /// step exceeds. Tests set it small to exercise the overflow-and-redo path.
+    /// Initial room of a bundle step for the fragments past its lines' buckets;
+    /// `None`: `memory::initial_fragment_capacity`. Tests set it small to exercise the
+    /// overflow-and-redo path.
     pub bundle_capacity: Option<u64>,
     /// Pixels along a full face edge of the lights' windows for the per-pixel direct light
     /// (less if the shadow memory budget needs it); `None`: chosen from the patches the
@@ -673,15 +674,10 @@ impl<'a> Renderer<'a> {
         let iteration = if options.iterations == 0 {
             None
         } else {
-            let capacity =
-                options.bundle_capacity.unwrap_or_else(|| fragment_bound(patches, buffers.radius, bundle_resolution));
-            // The bound of many small patches can exceed one binding while a step's
-            // fragments do not (they grow with the lines, not the patches): start at most at
-            // one binding, and grow only if a step needs it.
-            let capacity = match options.bundle_capacity {
-                Some(c) => c,
-                None => crate::memory::initial_fragment_capacity(&ctx.limits(), capacity),
-            };
+            let capacity = options.bundle_capacity.unwrap_or_else(|| {
+                let bound = fragment_bound(patches, buffers.radius, bundle_resolution);
+                crate::memory::initial_fragment_capacity(&ctx.limits(), bundle_resolution, bound)
+            });
             Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity)?)
         };
         let burn_in = burn_in_steps(scene, options);
@@ -691,7 +687,7 @@ impl<'a> Renderer<'a> {
                 let bound = fragment_bound(patches, buffers.radius, resolution);
                 let capacity = options
                     .bundle_capacity
-                    .unwrap_or_else(|| crate::memory::initial_fragment_capacity(&ctx.limits(), bound));
+                    .unwrap_or_else(|| crate::memory::initial_fragment_capacity(&ctx.limits(), resolution, bound));
                 Some((full.resized(ctx, &buffers, resolution, capacity)?, steps))
             }
             _ => None,
@@ -915,6 +911,11 @@ impl<'a> Renderer<'a> {
     /// Fragments (surfaces on lines) of the last step.
     pub fn fragments(&self) -> Result<u64> {
         self.iteration().fragments(self.ctx)
+    }
+
+    /// The last step's fragments past their lines' buckets (spill nodes; `LINE_BUCKET`).
+    pub fn spilled(&self) -> Result<u32> {
+        Ok(self.iteration().tally(self.ctx)?[0])
     }
 
     /// Whether a step since the last `clear_overflow` ran out of fragment room.

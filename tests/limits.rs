@@ -89,6 +89,9 @@ fn test03_the_per_patch_arrays_fit_their_pages_exactly_at_the_limit() {
     // a binding of the largest page fits, one byte less takes a patch out of a page and
     // refuses the first array that needs it, naming the figures.
     let (patches, options) = cornell_box();
+    // A grid whose lines' buckets (LINE_BUCKET fragments of 8 bytes a line) fit bindings this
+    // small, so that the per-patch arrays are what the limit decides.
+    let options = RenderOptions { bundle_resolution: Some(16), ..options };
     let n = patches.patches.len();
     let (largest, bytes) = smallest_binding(&patches);
     check_limits(&bindings_of(bytes), &patches, &options).expect("pages of exactly the limit fit");
@@ -192,11 +195,12 @@ fn test06_hemicube_and_bundle_resolutions_beyond_the_device() {
     // Without iterations no bundle is cast.
     check_limits(&limits, &patches, &RenderOptions { iterations: 0, ..bundle }).expect("no iteration");
 
-    // A side the textures allow, but a line table (4 bytes a line) larger than any buffer:
-    // the case that reached wgpu as a validation panic from small scenes.
+    // A side the textures allow, but lines' buckets (LINE_BUCKET fragments of 8 bytes a line)
+    // larger than any buffer: the case that reached wgpu as a validation panic from small
+    // scenes.
     let wide = RenderOptions { bundle_resolution: Some(8192), ..options.clone() };
     let lines = firstshot::iteration::line_table_bytes(8192);
-    assert_eq!(lines, 4 * (8192 * 8192 + 1));
+    assert_eq!(lines, 8 * firstshot::layout::LINE_BUCKET as u64 * 8192 * 8192);
     refused(
         check_limits(&buffers_of(lines - 1), &patches, &wide),
         &["the ray-bundle line table", "--bundle-resolution"],

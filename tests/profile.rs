@@ -13,7 +13,7 @@ use firstshot::scene::{Material, MaterialKind, Patches};
 use glam::DVec3;
 
 const RESOLUTION: u32 = 64;
-const BUNDLE_STAGES: [&str; 7] = ["clear", "reflect", "count", "prefix_sum", "fill", "transfer", "finalize"];
+const BUNDLE_STAGES: [&str; 5] = ["clear", "reflect", "visibility", "transfer", "finalize"];
 
 /// A closed diffuse room with glowing walls, seen from inside: every step has work in
 /// every stage.
@@ -68,8 +68,8 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
             renderer.submit_step(k);
         }
     }
-    // Without `bundle_capacity` the list's room is the geometric bound.
-    let bound = renderer.bundle_size().0 as u64;
+    let radius = firstshot::gpu::scene_buffers::bounding_sphere(&patches).1;
+    let bound = firstshot::iteration::fragment_bound(&patches, radius, RESOLUTION);
     let image = renderer.read_image().unwrap().pixels;
     (renderer.read_state().unwrap(), image, renderer.fragments().unwrap(), bound)
 }

@@ -5,17 +5,28 @@
 // signed fixed-point sums (scaled so the step's largest magnitude fits in 30 bits), so the result
 // does not depend on thread order and needs no float atomics.
 //
-// Compute, one invocation per line (2D dispatch past 65535 workgroups), which sorts its
-// own slice of the fragments in place.
+// Two compute entry points. `gather_long_lines` (a fixed grid striding over bundle_visibility's
+// list of lines past their bucket, a few in a thousand) gathers each such line's bucket and
+// spill chain into a slice of its own past the buckets and records it in `slices`; a slice
+// past the capacity sets `overflow` (the host grows the lists and redoes the steps). Then
+// `main`, one invocation per line (2D dispatch past 65535 workgroups), sorts the line's
+// slice (its bucket, or its slice in `slices` when its count exceeds LINE_BUCKET) in place
+// and transfers along it. The image's gather finds the lines the same way.
 // Host: src/stages/bundle_transfer.rs. Its `SPEC` is the one statement of the bindings (names,
 // kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> bundle: Bundle;
-@group(0) @binding(1) var<storage, read> offsets: array<u32>;
-@group(0) @binding(2) var<storage, read_write> fragments: array<vec2<u32>>;
-@group(0) @binding(3) var<storage, read> outgoing: array<vec4<f32>>;
-@group(0) @binding(4) var<storage, read_write> sums: array<atomic<u32>>;
-@group(0) @binding(5) var<storage, read> max_bits: array<u32>;
+@group(0) @binding(1) var<storage, read> counts: array<u32>;
+@group(0) @binding(2) var<storage, read> heads: array<u32>;
+@group(0) @binding(3) var<storage, read_write> fragments: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read> spill: array<vec4<u32>>;
+@group(0) @binding(5) var<storage, read_write> tally: array<atomic<u32>>;
+@group(0) @binding(6) var<storage, read_write> overflow: atomic<u32>;
+@group(0) @binding(7) var<storage, read_write> slices: array<vec2<u32>>;
+@group(0) @binding(8) var<storage, read> long_lines: array<u32>;
+@group(0) @binding(9) var<storage, read> outgoing: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> sums: array<atomic<u32>>;
+@group(0) @binding(11) var<storage, read> max_bits: array<u32>;
 
 // Fixed-point scale 2^(30 - e) with largest magnitude < 2^e (a rounded value stays below
 // 2^30, a sign bit to spare): shared with bundle_finalize.
@@ -46,16 +57,56 @@ fn add_fixed(index: u32, value: i32) {
     }
 }
 
+// Dispatched as LONG_LINES_WORKGROUPS workgroups: each invocation takes every
+// LONG_LINES_INVOCATIONS-th line of the list.
+const LONG_LINES_INVOCATIONS: u32 = LONG_LINES_WORKGROUPS * 64u;
+
+@compute @workgroup_size(64)
+fn gather_long_lines(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let listed = min(atomicLoad(&tally[TALLY_LONG_LINES]), bundle.capacity);
+    let buckets = bundle.resolution * bundle.resolution * LINE_BUCKET;
+    for (var i = gid.x; i < listed; i += LONG_LINES_INVOCATIONS) {
+        let line = long_lines[i];
+        let n = counts[line];
+        let base = atomicAdd(&tally[TALLY_LONG], n);
+        if (base + n > bundle.capacity) {
+            atomicMax(&overflow, 1u);
+            slices[line] = vec2<u32>(0u, 0u);
+            continue;
+        }
+        let begin = buckets + base;
+        for (var k = 0u; k < LINE_BUCKET; k++) {
+            fragments[begin + k] = fragments[line * LINE_BUCKET + k];
+        }
+        var end = begin + LINE_BUCKET;
+        // The chain is short of n only when the spill list overflowed (the steps are redone).
+        var node = heads[line];
+        while (node != 0u && end < begin + n) {
+            let s = spill[node - 1u];
+            fragments[end] = s.xy;
+            node = s.z;
+            end++;
+        }
+        slices[line] = vec2<u32>(begin, end);
+    }
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let line = gid.x + gid.y * groups.x * 64u;
     if (line >= bundle.resolution * bundle.resolution) {
         return;
     }
-    let begin = offsets[line];
-    let end = min(offsets[line + 1u], bundle.capacity);
-    if (begin >= end) {
+    let n = counts[line];
+    if (n == 0u) {
         return;
+    }
+    var begin = line * LINE_BUCKET;
+    var end = begin + n;
+    if (n > LINE_BUCKET) {
+        let slice = slices[line];
+        begin = slice.x;
+        end = slice.y;
     }
     for (var a = begin + 1u; a < end; a++) {
         let item = fragments[a];

@@ -1,26 +1,33 @@
 // Bundle visibility (docs/ALGORITHM.md 2.3): every patch projected in parallel along the bundle's
 // direction onto its grid; every surface crossing a pixel's line is kept, not only the
-// nearest. `fs_count` counts the surfaces per line; after a prefix sum of the counts,
-// `fs_fill` writes (depth along d, patch) into each line's slice of the fragment list.
-// The order inside a slice is whatever the rasteriser produced: bundle_transfer sorts it.
+// nearest, in one pass. Each line owns LINE_BUCKET slots of the fragment list; its first
+// LINE_BUCKET surfaces go there, the rest to the spill list, chained per line from `heads`
+// (node + 1, 0 ends the chain), and the line is listed in `long_lines`. bundle_transfer
+// gathers a listed line into one slice and sorts every line by depth: the order here is
+// whatever the rasteriser produced.
 //
 // Render pass, no culling, no depth test, a depth-only attachment that nothing reads.
-// Vertex input: RasterVertex. A slot past the capacity sets `overflow`: the host grows the
-// list and redoes the steps.
+// Vertex input: RasterVertex. A spill node past the capacity sets `overflow`: the host
+// grows the spill list and redoes the steps.
 // Host: src/stages/bundle_visibility.rs. Its `SPEC` is the one statement of the bindings
 // (names, kinds, access); tests/kernel_bindings.rs holds it against this file.
 
 @group(0) @binding(0) var<uniform> bundle: Bundle;
 @group(0) @binding(1) var<storage, read_write> counts: array<atomic<u32>>;
-@group(0) @binding(2) var<storage, read> offsets: array<u32>;
-@group(0) @binding(3) var<storage, read_write> cursor: array<atomic<u32>>;
-@group(0) @binding(4) var<storage, read_write> fragments: array<vec2<u32>>;
-@group(0) @binding(5) var<storage, read_write> overflow: atomic<u32>;
-@group(0) @binding(6) var<storage, read> outgoing: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> heads: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> fragments: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read_write> spill: array<vec4<u32>>;
+@group(0) @binding(5) var<storage, read_write> tally: array<atomic<u32>>;
+@group(0) @binding(6) var<storage, read_write> overflow: atomic<u32>;
+@group(0) @binding(7) var<storage, read_write> long_lines: array<u32>;
+@group(0) @binding(8) var<storage, read> outgoing: array<vec4<f32>>;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) depth: f32,
+    // The patch | FRAGMENT_FRONT_BIT when its front faces +d: the facing travels with the
+    // fragment, so sorting and transfer need not look up the patch, and it is looked up
+    // once a vertex, not once a fragment.
     @location(1) @interpolate(flat) patch_id: u32,
 }
 
@@ -35,29 +42,31 @@ fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32) -> Vert
         clamp(0.5 + 0.49 * depth * bundle.centre.w, 0.0, 1.0),
         1.0);
     out.depth = depth;
-    out.patch_id = patch_id & ~VERTEX_TWIN_BIT;
+    let id = patch_id & ~VERTEX_TWIN_BIT;
+    out.patch_id = id | select(0u, FRAGMENT_FRONT_BIT, outgoing_at(id).w > 0.0);
     return out;
-}
-
-fn line_index(frag: vec4<f32>) -> u32 {
-    let pixel = vec2<u32>(frag.xy);
-    return pixel.y * bundle.resolution + pixel.x;
-}
-
-@fragment
-fn fs_count(in: VertexOut) {
-    atomicAdd(&counts[line_index(in.clip)], 1u);
 }
 
 @fragment
 fn fs_fill(in: VertexOut) {
-    let line = line_index(in.clip);
-    let slot = offsets[line] + atomicAdd(&cursor[line], 1u);
-    if (slot < bundle.capacity) {
-        // The facing travels with the fragment, so sorting and transfer need not look up
-        // the patch.
-        let front = select(0u, FRAGMENT_FRONT_BIT, outgoing_at(in.patch_id).w > 0.0);
-        fragments[slot] = vec2<u32>(bitcast<u32>(in.depth), in.patch_id | front);
+    let pixel = vec2<u32>(in.clip.xy);
+    let line = pixel.y * bundle.resolution + pixel.x;
+    let fragment = vec2<u32>(bitcast<u32>(in.depth), in.patch_id);
+    let slot = atomicAdd(&counts[line], 1u);
+    if (slot < LINE_BUCKET) {
+        fragments[line * LINE_BUCKET + slot] = fragment;
+        return;
+    }
+    if (slot == LINE_BUCKET) {
+        // The line's first surface past its bucket lists the line, once.
+        let listed = atomicAdd(&tally[TALLY_LONG_LINES], 1u);
+        if (listed < bundle.capacity) {
+            long_lines[listed] = line;
+        }
+    }
+    let node = atomicAdd(&tally[TALLY_SPILLED], 1u);
+    if (node < bundle.capacity) {
+        spill[node] = vec4<u32>(fragment, atomicExchange(&heads[line], node + 1u), 0u);
     } else {
         atomicMax(&overflow, 1u);
     }

@@ -43,10 +43,11 @@
 @group(1) @binding(2) var kept_atlas: texture_2d<u32>;
 @group(1) @binding(3) var pass_atlas: texture_2d<u32>;
 @group(2) @binding(0) var<uniform> bundle: Bundle;
-@group(2) @binding(1) var<storage, read> offsets: array<u32>;
-@group(2) @binding(2) var<storage, read> fragments: array<vec2<u32>>;
-@group(2) @binding(3) var<storage, read> image_outgoing: array<vec4<f32>>;
-@group(2) @binding(4) var<storage, read> image_mean_radiance: array<vec4<f32>>;
+@group(2) @binding(1) var<storage, read> counts: array<u32>;
+@group(2) @binding(2) var<storage, read> slices: array<vec2<u32>>;
+@group(2) @binding(3) var<storage, read> fragments: array<vec2<u32>>;
+@group(2) @binding(4) var<storage, read> image_outgoing: array<vec4<f32>>;
+@group(2) @binding(5) var<storage, read> image_mean_radiance: array<vec4<f32>>;
 
 // The segment from y to x leaves out this share of its length at each end: its ends lie on
 // the light and on x's own surface.
@@ -346,8 +347,16 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
         return bundle.environment.rgb;
     }
     let line = u32(cell.y) * bundle.resolution + u32(cell.x);
-    let begin = offsets[line];
-    let end = min(offsets[line + 1u], bundle.capacity);
+    // The line's sorted surfaces: its bucket, or past LINE_BUCKET its own slice
+    // (bundle_transfer).
+    let count = counts[line];
+    var begin = line * LINE_BUCKET;
+    var end = begin + count;
+    if (count > LINE_BUCKET) {
+        let slice = slices[line];
+        begin = slice.x;
+        end = slice.y;
+    }
     let depth = dot(rel, bundle.direction.xyz);
     // The line's fragments lie at depths taken at its centre, up to a pixel's half diagonal
     // from x's ray: a surface within `slack` of x along the line may still be ahead of it.

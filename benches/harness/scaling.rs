@@ -166,19 +166,8 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
 fn print_rows(rows: &[Row]) {
     let stages: Vec<String> = rows.iter().find(|r| r.error.is_none()).map_or(vec![], |r| {
         // Product order, not alphabetical.
-        let order = [
-            "clear",
-            "reflect",
-            "count",
-            "prefix_sum",
-            "fill",
-            "transfer",
-            "finalize",
-            "camera",
-            "light_windows",
-            "direct",
-            "gather",
-        ];
+        let order =
+            ["clear", "reflect", "visibility", "transfer", "finalize", "camera", "light_windows", "direct", "gather"];
         order.iter().filter(|s| r.stage_ms.contains_key(**s)).map(|s| s.to_string()).collect()
     });
     let mut headers = vec!["study", "level", "bundle", "patches", "first shot ms", "step ms", "frags/step", "ns/frag"];
@@ -218,7 +207,7 @@ fn write_plots(config: &Config, slot: &Slot, rows: &[Row]) -> Result<(), String>
             points: ok(study).map(|r| (x(r), r.step_ms.median)).collect(),
             dashed: false,
         }];
-        for stage in ["transfer", "fill", "count", "prefix_sum", "direct", "gather", "reflect"] {
+        for stage in ["transfer", "visibility", "direct", "gather", "reflect"] {
             out.push(Series {
                 label: format!("{stage} (alone)"),
                 points: ok(study).filter_map(|r| Some((x(r), *r.stage_ms.get(stage)?))).collect(),

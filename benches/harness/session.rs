@@ -163,20 +163,18 @@ pub fn stage_bytes(stage: &str, s: Sizes) -> f64 {
     // First-shot entries per patch: each is 8 bytes plus its light sample.
     let table = s.pairs * (8.0 + sample) + 4.0 * s.patches;
     match stage {
-        // counts, cursor (u32 per line) and max_bits are zeroed.
+        // counts, heads (u32 per line), the tally and max_bits are zeroed.
         "clear" => 8.0 * s.lines,
         IDLE => 0.0,
         // Patch, material, state and the first-shot entries in; O_j (vec4) and an atomic max out.
         "reflect" => s.patches * (patch + material + state + 16.0 + 8.0) + table,
-        // Triangles in; one atomic add on a line count per fragment.
-        "count" => s.patches * vertex + 8.0 * s.fragments,
-        // Scan: counts in, offsets out; the block-offset pass reads and writes offsets again.
-        "prefix_sum" => 16.0 * s.lines,
-        // Triangles in; per fragment an offset, an atomic on the cursor, an 8-byte write.
-        "fill" => s.patches * vertex + 20.0 * s.fragments,
-        // Offsets in; per fragment: read and write it (sort), read its own and its
-        // neighbour's O (16 bytes each), three 64-bit fixed-point atomic adds.
-        "transfer" => 4.0 * s.lines + s.fragments * (16.0 + 32.0 + 24.0),
+        // Triangles in; per fragment its patch's O (facing), an atomic add on the line's
+        // count and an 8-byte write into the line's bucket (the few past it: a spill node).
+        "visibility" => s.patches * vertex + 28.0 * s.fragments,
+        // Per line its count and slice (12 bytes); per fragment: read and write it (sort),
+        // read its own and its neighbour's O (16 bytes each), three 64-bit fixed-point
+        // atomic adds.
+        "transfer" => 12.0 * s.lines + s.fragments * (16.0 + 32.0 + 24.0),
         // Sums (6 u32), patch, O in; state out.
         "finalize" => s.patches * (24.0 + patch + 16.0 + state),
         // Triangles in; an id and a depth per pixel out.
@@ -187,7 +185,7 @@ pub fn stage_bytes(stage: &str, s: Sizes) -> f64 {
         // Per pixel: id, patch, material, per light a face (112 bytes), 4 texels and up to
         // 4 triangles (48 bytes each) of the window, the running sum read and written.
         "direct" => s.pixels * (4.0 + patch + material + 112.0 + 16.0 + 4.0 * 48.0 + 32.0),
-        // Per pixel: id, patch, material, the line's offsets and 4 fragments with their
+        // Per pixel: id, patch, material, the line's slice and 4 fragments with their
         // patches' planes and one O, the running sum read and written.
         "gather" => s.pixels * (4.0 + patch + material + 8.0 + 4.0 * (8.0 + 16.0) + 16.0 + 32.0),
         _ => f64::NAN,

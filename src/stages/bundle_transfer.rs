@@ -9,15 +9,27 @@ use crate::layout::GpuBundle;
 pub const SPEC: KernelSpec = KernelSpec {
     stem: "bundle_transfer",
     visibility: wgpu::ShaderStages::COMPUTE,
-    // One invocation per line.
-    entry_points: &[compute("main", [64, 1, 1])],
+    // `gather_long_lines`: LONG_LINES_WORKGROUPS; `main`: one invocation per line.
+    entry_points: &[compute("gather_long_lines", [64, 1, 1]), compute("main", [64, 1, 1])],
     groups: &[&[
         uniform::<GpuBundle>("bundle"),
-        // Line starts, resolution^2 + 1.
-        read::<u32>("offsets"),
-        // (depth bits, patch | FRAGMENT_FRONT_BIT); each line's slice sorted in place by its
-        // invocation.
+        // Surfaces per line, resolution^2 (bundle_visibility).
+        read::<u32>("counts"),
+        // Each line's spill chain (bundle_visibility).
+        read::<u32>("heads"),
+        // (depth bits, patch | FRAGMENT_FRONT_BIT): the lines' buckets, then the long lines'
+        // slices, which this pass fills; each line's slice sorted in place by its invocation.
         read_write::<[u32; 2]>("fragments"),
+        read::<[u32; 4]>("spill"),
+        // TALLY_LONG: fragments of the long lines' slices taken; TALLY_LONG_LINES: lines listed.
+        read_write::<u32>("tally"),
+        // Set when a long line's slice lies past the capacity.
+        read_write::<u32>("overflow"),
+        // (begin, end) of each long line's slice of `fragments` (gather_long_lines), for
+        // `main` and the image's gather.
+        read_write::<[u32; 2]>("slices"),
+        // The lines past their bucket (bundle_visibility).
+        read::<u32>("long_lines"),
         // O_j from bundle_reflect.
         read::<[f32; 4]>("outgoing").paged(OUTGOING.pages),
         // 6 per patch: lo, hi per channel.
@@ -28,16 +40,19 @@ pub const SPEC: KernelSpec = KernelSpec {
 };
 
 pub struct BundleTransfer {
+    long_lines: wgpu::ComputePipeline,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     lines: u32,
 }
 
 impl BundleTransfer {
-    /// `buffers`: bundle, offsets, fragments, outgoing, sums, max_bits (`SPEC`'s group 0).
-    pub fn new(device: &wgpu::Device, buffers: [Resource; 6], lines: u32) -> Self {
+    /// `buffers`: bundle, counts, heads, fragments, spill, tally, overflow, slices,
+    /// long_lines, outgoing, sums, max_bits (`SPEC`'s group 0).
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 12], lines: u32) -> Self {
         let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
         BundleTransfer {
+            long_lines: built.compute_pipeline(device, "gather_long_lines"),
             pipeline: built.compute_pipeline(device, "main"),
             bind_group: built.resource_bind_group(device, 0, &buffers),
             lines,
@@ -45,6 +60,13 @@ impl BundleTransfer {
     }
 
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {
+        kernel::dispatch(
+            encoder,
+            "firstshot.bundle_transfer.long_lines",
+            &self.long_lines,
+            &[&self.bind_group],
+            (crate::layout::LONG_LINES_WORKGROUPS, 1),
+        );
         let groups = SPEC.linear("main", self.lines);
         kernel::dispatch(encoder, "firstshot.bundle_transfer.pass", &self.pipeline, &[&self.bind_group], groups);
     }

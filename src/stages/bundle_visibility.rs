@@ -1,5 +1,5 @@
 //! Bundle visibility (`wgsl/bundle_visibility.wgsl`): every surface on every line of the
-//! bundle's grid, by a counting pass, a prefix sum and a filling pass.
+//! bundle's grid, in one rasterisation pass into per-line buckets and a spill list.
 
 use crate::gpu::bindings::{KernelSpec, Resource, fragment, read, read_write, uniform, vertex};
 use crate::gpu::scene_buffers::OUTGOING;
@@ -11,35 +11,39 @@ use crate::stages::camera_item_buffer::raster_vertex_layout;
 pub const SPEC: KernelSpec = KernelSpec {
     stem: "bundle_visibility",
     visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-    entry_points: &[vertex("vs_main"), fragment("fs_count"), fragment("fs_fill")],
+    entry_points: &[vertex("vs_main"), fragment("fs_fill")],
     groups: &[&[
         uniform::<GpuBundle>("bundle"),
-        // resolution^2 + 1; fs_count.
+        // Surfaces per line, resolution^2.
         read_write::<u32>("counts"),
-        // Exclusive prefix sums of counts; fs_fill.
-        read::<u32>("offsets"),
-        // resolution^2; fs_fill.
-        read_write::<u32>("cursor"),
-        // (bits of depth, patch | FRAGMENT_FRONT_BIT when the patch's front faces +d); fs_fill.
+        // The line's last spill node + 1 (0: none), resolution^2.
+        read_write::<u32>("heads"),
+        // LINE_BUCKET slots a line, then the long lines' slices (bundle_transfer):
+        // (bits of depth, patch | FRAGMENT_FRONT_BIT when the patch's front faces +d).
         read_write::<[u32; 2]>("fragments"),
-        // Set when a slot lies past the capacity: the host grows the list and redoes the steps.
+        // (fragment, next node + 1, unused) for a line's surfaces past its bucket.
+        read_write::<[u32; 4]>("spill"),
+        // TALLY_SPILLED: spill nodes taken; TALLY_LONG_LINES: lines listed.
+        read_write::<u32>("tally"),
+        // Set when a node lies past the capacity: the host grows the lists and redoes the steps.
         read_write::<u32>("overflow"),
-        // w: s_j from bundle_reflect; fs_fill.
+        // The lines past their bucket (TALLY_LONG_LINES of them), for bundle_transfer.
+        read_write::<u32>("long_lines"),
+        // w: s_j from bundle_reflect; vs_main.
         read::<[f32; 4]>("outgoing").paged(OUTGOING.pages),
     ]],
 };
 
 pub struct BundleVisibility {
-    count: wgpu::RenderPipeline,
     fill: wgpu::RenderPipeline,
     bind_group: wgpu::BindGroup,
     depth_view: wgpu::TextureView,
 }
 
 impl BundleVisibility {
-    /// `buffers`: bundle, counts, offsets, cursor, fragments, overflow, outgoing (`SPEC`'s
-    /// group 0).
-    pub fn new(device: &wgpu::Device, buffers: [Resource; 7], resolution: u32) -> Self {
+    /// `buffers`: bundle, counts, heads, fragments, spill, tally, overflow, long_lines,
+    /// outgoing (`SPEC`'s group 0).
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 9], resolution: u32) -> Self {
         let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
         let pipeline = |entry: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -82,23 +86,15 @@ impl BundleVisibility {
             view_formats: &[],
         });
         BundleVisibility {
-            count: pipeline("fs_count"),
             fill: pipeline("fs_fill"),
             bind_group: built.resource_bind_group(device, 0, &buffers),
             depth_view: depth.create_view(&Default::default()),
         }
     }
 
-    fn record(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        pipeline: &wgpu::RenderPipeline,
-        label: &str,
-        vertices: &wgpu::Buffer,
-        patch_count: u32,
-    ) {
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, vertices: &wgpu::Buffer, patch_count: u32) {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some(label),
+            label: Some("firstshot.bundle_visibility.fill"),
             color_attachments: &[],
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &self.depth_view,
@@ -109,17 +105,9 @@ impl BundleVisibility {
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        pass.set_pipeline(pipeline);
+        pass.set_pipeline(&self.fill);
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(0, vertices.slice(..));
         pass.draw(0..patch_count * 3, 0..1);
-    }
-
-    pub fn record_count(&self, encoder: &mut wgpu::CommandEncoder, vertices: &wgpu::Buffer, patch_count: u32) {
-        self.record(encoder, &self.count, "firstshot.bundle_visibility.count", vertices, patch_count);
-    }
-
-    pub fn record_fill(&self, encoder: &mut wgpu::CommandEncoder, vertices: &wgpu::Buffer, patch_count: u32) {
-        self.record(encoder, &self.fill, "firstshot.bundle_visibility.fill", vertices, patch_count);
     }
 }

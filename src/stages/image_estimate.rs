@@ -43,9 +43,11 @@ pub const SPEC: KernelSpec = KernelSpec {
         // The gather (`iteration::GatherBuffers`), after the step's transfer sorted its lines.
         &[
             uniform::<GpuBundle>("bundle"),
-            // Line starts, resolution^2 + 1.
-            read::<u32>("offsets"),
-            // (depth bits, patch | FRAGMENT_FRONT_BIT), each line sorted by depth.
+            // Surfaces per line, resolution^2: a line's bucket holds them up to LINE_BUCKET.
+            read::<u32>("counts"),
+            // (begin, end) of each longer line's slice of `fragments`, resolution^2.
+            read::<[u32; 2]>("slices"),
+            // (depth bits, patch | FRAGMENT_FRONT_BIT), each line's slice sorted by depth.
             read::<[u32; 2]>("fragments"),
             // What each patch sends the image this step (`bundle_reflect`'s image_outgoing).
             read::<[f32; 4]>("image_outgoing").paged(crate::gpu::scene_buffers::OUTGOING.pages),
@@ -163,8 +165,10 @@ impl ImageEstimate {
     /// Group 2; without an iteration, placeholders that `direct` never reads.
     fn gather_group(device: &wgpu::Device, built: &Kernel, gather: Option<&GatherBuffers>) -> wgpu::BindGroup {
         let placeholder;
-        let (bundle, offsets, fragments, outgoing, mean) = match gather {
-            Some(g) => (&g.bundle, &g.offsets, &g.fragments, &g.image_outgoing[..], &g.image_mean_radiance[..]),
+        let (bundle, counts, slices, fragments, outgoing, mean) = match gather {
+            Some(g) => {
+                (&g.bundle, &g.counts, &g.slices, &g.fragments, &g.image_outgoing[..], &g.image_mean_radiance[..])
+            }
             None => {
                 let none = wgpu::BufferUsages::empty();
                 placeholder = [
@@ -173,12 +177,12 @@ impl ImageEstimate {
                         "firstshot.image_estimate.no_bundle",
                         &<GpuBundle as bytemuck::Zeroable>::zeroed(),
                     ),
-                    buffers::storage_zeroed(device, "firstshot.image_estimate.no_offsets", 16, none),
+                    buffers::storage_zeroed(device, "firstshot.image_estimate.no_lines", 16, none),
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_fragments", 16, none),
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_image_outgoing", 16, none),
                 ];
                 let page = std::slice::from_ref(&placeholder[3]);
-                (&placeholder[0], &placeholder[1], &placeholder[2], page, page)
+                (&placeholder[0], &placeholder[1], &placeholder[1], &placeholder[2], page, page)
             }
         };
         built.bind_group(
@@ -186,7 +190,8 @@ impl ImageEstimate {
             2,
             &[
                 ("bundle", bundle.into()),
-                ("offsets", offsets.into()),
+                ("counts", counts.into()),
+                ("slices", slices.into()),
                 ("fragments", fragments.into()),
                 ("image_outgoing", crate::gpu::bindings::Resource::Pages(outgoing)),
                 ("image_mean_radiance", crate::gpu::bindings::Resource::Pages(mean)),
