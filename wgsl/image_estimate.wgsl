@@ -38,6 +38,7 @@
 @group(0) @binding(3) var<storage, read> patches: array<Patch>;
 @group(0) @binding(4) var<storage, read> materials: array<Material>;
 @group(0) @binding(5) var<storage, read_write> image_sum: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> edges: array<atomic<u32>>;
 @group(1) @binding(0) var<storage, read> lights: array<DirectLight>;
 @group(1) @binding(1) var<storage, read> faces: array<WindowFace>;
 @group(1) @binding(2) var kept_atlas: texture_2d<u32>;
@@ -336,15 +337,23 @@ fn consider(n: Nearest, k: u32, range: vec2<u32>, j: u32, x: vec3<f32>, toward: 
     return out;
 }
 
-// The radiance arriving at x (on patch j, normal n) from direction `toward` (= s d) along
-// this step's bundle.
-fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
+// Where x lies on this step's bundle: its line's sorted fragments [begin, end) and `lo`,
+// the first at or past x's depth (less a pixel's slack) in the direction of travel s d;
+// `outside` when x projects off the grid.
+struct OnLine {
+    begin: u32,
+    end: u32,
+    lo: u32,
+    outside: bool,
+}
+
+fn on_line(x: vec3<f32>, s: f32) -> OnLine {
     let rel = x - bundle.centre.xyz;
     let clip = vec2<f32>(dot(rel, bundle.axis_u.xyz) + bundle.axis_u.w, dot(rel, bundle.axis_v.xyz) + bundle.axis_v.w);
     let r = f32(bundle.resolution);
     let cell = vec2<f32>(0.5 * (clip.x + 1.0), 0.5 * (1.0 - clip.y)) * r;
     if (any(cell < vec2<f32>(0.0)) || any(cell >= vec2<f32>(r))) {
-        return bundle.environment.rgb;
+        return OnLine(0u, 0u, 0u, true);
     }
     let line = u32(cell.y) * bundle.resolution + u32(cell.x);
     // The line's sorted surfaces: its bucket, or past LINE_BUCKET its own slice
@@ -374,13 +383,25 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
             hi = mid;
         }
     }
+    return OnLine(begin, end, lo, false);
+}
+
+// What x (on patch j) receives from direction `toward` (= s d) where j's own fragment lies on
+// x's line: rgb the radiance and w = 1; w = 0 where it does not (x near j's edge), which
+// `nearest_received` then decides.
+fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> vec4<f32> {
+    if (line.outside) {
+        return vec4<f32>(bundle.environment.rgb, 1.0);
+    }
+    let begin = line.begin;
+    let end = line.end;
+    let lo = line.lo;
     // Where x's own patch j lies on the line (its fragment within two places of x's depth),
     // x receives what j receives there in the transfer: from the next fragment in j's front
     // direction, O if that one's front faces back, black if its back does, the environment
     // past the line's end. Then the gather agrees with the patch state J_j it refines, also
     // at contacts, where the line's centre and x's own ray can pass on different sides.
     let range = vec2<u32>(begin, end);
-    let eps = 1e-5 / bundle.centre.w;
     var own = NO_PATCH;
     own = own_fragment(own, lo - 2u, range, j);
     own = own_fragment(own, lo - 1u, range, j);
@@ -391,19 +412,29 @@ fn gathered(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32) -> vec3<f32> {
         let k = own - 1u;
         let front = (fragments[k].y & FRAGMENT_FRONT_BIT) != 0u;
         if ((front && k + 1u >= end) || (!front && k == begin)) {
-            return bundle.environment.rgb;
+            return vec4<f32>(bundle.environment.rgb, 1.0);
         }
         let other = fragments[select(k - 1u, k + 1u, front)].y;
         if (((other & FRAGMENT_FRONT_BIT) != 0u) != front) {
             let m = other & ~FRAGMENT_FRONT_BIT;
-            return image_outgoing_at(m).rgb + emitted_share(m, x, toward);
+            return vec4<f32>(image_outgoing_at(m).rgb + emitted_share(m, x, toward), 1.0);
         }
-        return vec3<f32>(0.0);
+        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
-    // Else (x near j's edge, the line's centre on another patch) the line may pass through
-    // a surface x's ray misses (a neighbour's back face: black) or beside one x's ray hits.
-    // The next four fragments in the direction of travel are the candidates. Unrolled: a
-    // CPU adapter runs a data-dependent loop over storage many times slower.
+    return vec4<f32>(0.0);
+}
+
+// What x receives where j's own fragment is not on x's line (x near j's edge, the line's
+// centre on another patch): the line may pass through a surface x's ray misses (a
+// neighbour's back face: black) or beside one x's ray hits. The next four fragments in the
+// direction of travel are the candidates. Unrolled: a CPU adapter runs a data-dependent
+// loop over storage many times slower. Only the pixels `gather` lists in `edges` get here
+// (`gather_edges`): run among the others, this branch made every vector of 8 pixels that
+// held one such pixel pay for it.
+fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLine) -> vec3<f32> {
+    let range = vec2<u32>(line.begin, line.end);
+    let lo = line.lo;
+    let eps = 1e-5 / bundle.centre.w;
     let none = Candidate(3.4e38, NO_PATCH);
     var n = Nearest(none, none);
     if (s > 0.0) {
@@ -498,8 +529,27 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }
 
+// G at x from what it receives from `toward` (= s d, density 1 / (2 pi) on x's hemisphere).
+fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
+    let m = materials[patches_at(at.j).material];
+    let cos_d = abs(dot(at.n, toward));
+    // The diffuse part with the control variate of the state's K_j (bundle_finalize):
+    // 2 pi (kd / pi) (|n . d| L - (|n . d| - 1/2) Lbar_j) has the mean of
+    // 2 pi (kd / pi) |n . d| L, because |n . d| has mean 1/2 over x's hemisphere and
+    // Lbar_j was drawn before d; where L is near Lbar_j (the bulk of the indirect light)
+    // it has almost none of the variance of the factor |n . d|.
+    let mean = image_mean_radiance_at(at.j).rgb;
+    var radiance = 2.0 * m.diffuse.rgb * (cos_d * incoming - (cos_d - 0.5) * mean);
+    if (dot(at.n, toward) > 0.0 && dot(at.n, at.w_out) > 0.0) {
+        radiance += 2.0 * PI * incoming * cos_d * brdf_glossy(m, at.n, toward, at.w_out);
+    }
+    return radiance;
+}
+
 // G: the indirect light gathered through this step's bundle, added to the second half of
-// the image sum (bound here as image_sum).
+// the image sum (bound here as image_sum). A pixel whose patch has no fragment of its own
+// near x on x's line is listed in `edges` instead (edges[0] counts them; the host clears
+// it before the pass) and left to `gather_edges`.
 @compute @workgroup_size(8, 8)
 fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
@@ -512,23 +562,37 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let at = seen(xy);
     var radiance = vec3<f32>(0.0);
     if (at.kind == SEEN_SURFACE) {
-        let m = materials[patches_at(at.j).material];
         let d = bundle.direction.xyz;
         let s = bundle_side(at.n, d);
         let toward = s * d;
-        // -s d has density 1 / (2 pi) on x's hemisphere.
-        let incoming = gathered(at.j, at.x, toward, s);
-        let cos_d = abs(dot(at.n, d));
-        // The diffuse part with the control variate of the state's K_j (bundle_finalize):
-        // 2 pi (kd / pi) (|n . d| L - (|n . d| - 1/2) Lbar_j) has the mean of
-        // 2 pi (kd / pi) |n . d| L, because |n . d| has mean 1/2 over x's hemisphere and
-        // Lbar_j was drawn before d; where L is near Lbar_j (the bulk of the indirect light)
-        // it has almost none of the variance of the factor |n . d|.
-        let mean = image_mean_radiance_at(at.j).rgb;
-        radiance = 2.0 * m.diffuse.rgb * (cos_d * incoming - (cos_d - 0.5) * mean);
-        if (dot(at.n, toward) > 0.0 && dot(at.n, at.w_out) > 0.0) {
-            radiance += 2.0 * PI * incoming * cos_d * brdf_glossy(m, at.n, toward, at.w_out);
+        let received = own_received(at.j, at.x, toward, on_line(at.x, s));
+        if (received.w == 0.0) {
+            let listed = atomicAdd(&edges[0], 1u);
+            atomicStore(&edges[listed + 1u], pixel);
+            return;
         }
+        radiance = gather_radiance(at, received.rgb, toward);
     }
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
+}
+
+// Dispatched as EDGE_WORKGROUPS workgroups of 64: each invocation takes every
+// EDGE_INVOCATIONS-th pixel `gather` listed.
+const EDGE_INVOCATIONS: u32 = EDGE_WORKGROUPS * 64u;
+
+// G of the pixels `gather` listed in `edges`, by the nearest surface ahead of x among the
+// candidates on x's line (`nearest_received`).
+@compute @workgroup_size(64)
+fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let size = camera.size.xy;
+    let listed = atomicLoad(&edges[0]);
+    for (var i = gid.x; i < listed; i += EDGE_INVOCATIONS) {
+        let pixel = atomicLoad(&edges[i + 1u]);
+        let at = seen(vec2<u32>(pixel % size.x, pixel / size.x + params.first_row));
+        let d = bundle.direction.xyz;
+        let s = bundle_side(at.n, d);
+        let toward = s * d;
+        let incoming = nearest_received(at.j, at.x, toward, s, on_line(at.x, s));
+        image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_radiance(at, incoming, toward), 1.0);
+    }
 }

@@ -15,8 +15,8 @@ use crate::{Error, Result};
 pub const SPEC: KernelSpec = KernelSpec {
     stem: "image_estimate",
     visibility: wgpu::ShaderStages::COMPUTE,
-    // One invocation per pixel.
-    entry_points: &[compute("direct", [8, 8, 1]), compute("gather", [8, 8, 1])],
+    // `direct`, `gather`: one invocation per pixel; `gather_edges`: EDGE_WORKGROUPS.
+    entry_points: &[compute("direct", [8, 8, 1]), compute("gather", [8, 8, 1]), compute("gather_edges", [64, 1, 1])],
     groups: &[
         &[
             uniform::<GpuCamera>("camera"),
@@ -30,6 +30,10 @@ pub const SPEC: KernelSpec = KernelSpec {
             // own group 0, so that each needs only 16 bytes a pixel of one binding). One
             // pixel per invocation: no race.
             read_write::<[f32; 4]>("image_sum"),
+            // The band's pixels whose gather needs the nearest surface on the line (x near
+            // its patch's edge): [0] their count, then their indices; `gather` lists them,
+            // `gather_edges` estimates them.
+            read_write::<u32>("edges"),
         ],
         // The direct light (`direct_light::DirectLights`).
         &[
@@ -78,6 +82,8 @@ struct Band {
     params: wgpu::Buffer,
     /// Le + D, then G.
     sums: [wgpu::Buffer; 2],
+    /// The gather's list of pixels left to `gather_edges` (a count, then one index a pixel).
+    edges: wgpu::Buffer,
     /// Group 0 for `direct` (binding `sums[0]`) and for `gather` (`sums[1]`).
     groups: [wgpu::BindGroup; 2],
 }
@@ -88,6 +94,7 @@ pub struct ImageEstimate {
     built: Kernel,
     direct_pipeline: wgpu::ComputePipeline,
     gather_pipeline: wgpu::ComputePipeline,
+    edges_pipeline: wgpu::ComputePipeline,
     bands: Vec<Band>,
     direct_group: wgpu::BindGroup,
     gather_group: wgpu::BindGroup,
@@ -109,6 +116,7 @@ impl ImageEstimate {
         let built = SPEC.build_paged(device, scene.paging());
         let direct_pipeline = built.compute_pipeline(device, "direct");
         let gather_pipeline = built.compute_pipeline(device, "gather");
+        let edges_pipeline = built.compute_pipeline(device, "gather_edges");
         let band_rows = band_rows.max(1);
         let bands = (0..camera.height)
             .step_by(band_rows as usize)
@@ -122,6 +130,12 @@ impl ImageEstimate {
                 let bytes = camera.width as u64 * rows as u64 * IMAGE_SUM_BYTES_PER_PIXEL;
                 let sums = ["firstshot.image_estimate.direct_sum", "firstshot.image_estimate.gather_sum"]
                     .map(|label| buffers::storage_zeroed(device, label, bytes, wgpu::BufferUsages::COPY_SRC));
+                let edges = buffers::storage_zeroed(
+                    device,
+                    "firstshot.image_estimate.edges",
+                    4 * (camera.width as u64 * rows as u64 + 1),
+                    wgpu::BufferUsages::empty(),
+                );
                 let groups = [0, 1].map(|half| {
                     built.bind_group(
                         device,
@@ -133,10 +147,11 @@ impl ImageEstimate {
                             ("patches", scene.patches.resource()),
                             ("materials", (&scene.materials).into()),
                             ("image_sum", (&sums[half]).into()),
+                            ("edges", (&edges).into()),
                         ],
                     )
                 });
-                Band { first_row, rows, params, sums, groups }
+                Band { first_row, rows, params, sums, edges, groups }
             })
             .collect();
         let direct_group = built.bind_group(
@@ -154,6 +169,7 @@ impl ImageEstimate {
             built,
             direct_pipeline,
             gather_pipeline,
+            edges_pipeline,
             bands,
             direct_group,
             gather_group,
@@ -212,8 +228,23 @@ impl ImageEstimate {
 
     /// Records one estimate of every pixel's indirect light G, gathered through this step's
     /// bundle (reads the camera item buffer of this pass).
+    /// (Two passes a band: `gather`, which lists the pixels near their patch's edge, then
+    /// `gather_edges` for those.)
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
-        self.record(encoder, "gather", &self.gather_pipeline, 1);
+        for band in &self.bands {
+            encoder.clear_buffer(&band.edges, 0, Some(4));
+            let groups = SPEC.grid("gather", [self.width, band.rows]);
+            let bind_groups = [&band.groups[1], &self.direct_group, &self.gather_group];
+            kernel::dispatch(encoder, "firstshot.image_estimate.gather", &self.gather_pipeline, &bind_groups, groups);
+            let edges = (crate::layout::EDGE_WORKGROUPS, 1);
+            kernel::dispatch(
+                encoder,
+                "firstshot.image_estimate.gather_edges",
+                &self.edges_pipeline,
+                &bind_groups,
+                edges,
+            );
+        }
     }
 
     fn record(&self, encoder: &mut wgpu::CommandEncoder, entry: &str, pipeline: &wgpu::ComputePipeline, half: usize) {
