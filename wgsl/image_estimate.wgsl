@@ -347,7 +347,8 @@ struct OnLine {
     outside: bool,
 }
 
-fn on_line(x: vec3<f32>, s: f32) -> OnLine {
+// x's line with `lo` at its start (`on_line` searches it).
+fn line_of(x: vec3<f32>) -> OnLine {
     let rel = x - bundle.centre.xyz;
     let clip = vec2<f32>(dot(rel, bundle.axis_u.xyz) + bundle.axis_u.w, dot(rel, bundle.axis_v.xyz) + bundle.axis_v.w);
     let r = f32(bundle.resolution);
@@ -366,15 +367,23 @@ fn on_line(x: vec3<f32>, s: f32) -> OnLine {
         begin = slice.x;
         end = slice.y;
     }
-    let depth = dot(rel, bundle.direction.xyz);
+    return OnLine(begin, end, begin, false);
+}
+
+fn on_line(x: vec3<f32>, s: f32) -> OnLine {
+    var line = line_of(x);
+    if (line.outside) {
+        return line;
+    }
+    let depth = dot(x - bundle.centre.xyz, bundle.direction.xyz);
     // The line's fragments lie at depths taken at its centre, up to a pixel's half diagonal
     // from x's ray: a surface within `slack` of x along the line may still be ahead of it.
     let slack = 0.75 * sqrt(bundle.direction.w);
     let start_depth = depth - s * slack;
     // First fragment at or past start_depth in the direction of travel (binary search over
     // the sorted line).
-    var lo = begin;
-    var hi = end;
+    var lo = line.begin;
+    var hi = line.end;
     while (lo < hi) {
         let mid = (lo + hi) / 2u;
         if (bitcast<f32>(fragments[mid].x) < start_depth) {
@@ -383,7 +392,8 @@ fn on_line(x: vec3<f32>, s: f32) -> OnLine {
             hi = mid;
         }
     }
-    return OnLine(begin, end, lo, false);
+    line.lo = lo;
+    return line;
 }
 
 // What x (on patch j) receives from direction `toward` (= s d) where j's own fragment lies on
@@ -548,8 +558,8 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
 
 // G: the indirect light gathered through this step's bundle, added to the second half of
 // the image sum (bound here as image_sum). A pixel whose patch has no fragment of its own
-// near x on x's line is listed in `edges` instead (edges[0] counts them; the host clears
-// it before the pass) and left to `gather_edges`.
+// near x on x's line is listed in `edges` instead (edges[0] counts them, the host clears
+// it before the pass; then pixel and `lo` a pair) and left to `gather_edges`.
 @compute @workgroup_size(8, 8)
 fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
@@ -565,10 +575,13 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         let d = bundle.direction.xyz;
         let s = bundle_side(at.n, d);
         let toward = s * d;
-        let received = own_received(at.j, at.x, toward, on_line(at.x, s));
+        let line = on_line(at.x, s);
+        let received = own_received(at.j, at.x, toward, line);
         if (received.w == 0.0) {
+            // With x's place on its line, so that gather_edges need not search it again.
             let listed = atomicAdd(&edges[0], 1u);
-            atomicStore(&edges[listed + 1u], pixel);
+            atomicStore(&edges[2u * listed + 1u], pixel);
+            atomicStore(&edges[2u * listed + 2u], line.lo);
             return;
         }
         radiance = gather_radiance(at, received.rgb, toward);
@@ -587,12 +600,14 @@ fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
     let listed = atomicLoad(&edges[0]);
     for (var i = gid.x; i < listed; i += EDGE_INVOCATIONS) {
-        let pixel = atomicLoad(&edges[i + 1u]);
+        let pixel = atomicLoad(&edges[2u * i + 1u]);
         let at = seen(vec2<u32>(pixel % size.x, pixel / size.x + params.first_row));
         let d = bundle.direction.xyz;
         let s = bundle_side(at.n, d);
         let toward = s * d;
-        let incoming = nearest_received(at.j, at.x, toward, s, on_line(at.x, s));
+        var line = line_of(at.x);
+        line.lo = atomicLoad(&edges[2u * i + 2u]);
+        let incoming = nearest_received(at.j, at.x, toward, s, line);
         image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_radiance(at, incoming, toward), 1.0);
     }
 }

@@ -31,8 +31,8 @@ pub const SPEC: KernelSpec = KernelSpec {
             // pixel per invocation: no race.
             read_write::<[f32; 4]>("image_sum"),
             // The band's pixels whose gather needs the nearest surface on the line (x near
-            // its patch's edge): [0] their count, then their indices; `gather` lists them,
-            // `gather_edges` estimates them.
+            // its patch's edge): [0] their count, then per pixel its index and its place on
+            // its line; `gather` lists them, `gather_edges` estimates them.
             read_write::<u32>("edges"),
         ],
         // The direct light (`direct_light::DirectLights`).
@@ -82,7 +82,7 @@ struct Band {
     params: wgpu::Buffer,
     /// Le + D, then G.
     sums: [wgpu::Buffer; 2],
-    /// The gather's list of pixels left to `gather_edges` (a count, then one index a pixel).
+    /// The gather's list of pixels left to `gather_edges` (a count, then two u32 a pixel).
     edges: wgpu::Buffer,
     /// Group 0 for `direct` (binding `sums[0]`) and for `gather` (`sums[1]`).
     groups: [wgpu::BindGroup; 2],
@@ -133,7 +133,7 @@ impl ImageEstimate {
                 let edges = buffers::storage_zeroed(
                     device,
                     "firstshot.image_estimate.edges",
-                    4 * (camera.width as u64 * rows as u64 + 1),
+                    4 * (2 * camera.width as u64 * rows as u64 + 1),
                     wgpu::BufferUsages::empty(),
                 );
                 let groups = [0, 1].map(|half| {
