@@ -82,14 +82,24 @@ pub struct MemoryPlan {
 }
 
 /// The first capacity for the fragments past the lines' buckets (the spill list and the long
-/// lines' slices): an eighth of the lines (at least 1024), at most the geometric bound of
-/// all fragments and what one binding holds. A step that needs more has its batch redone
-/// with twice the room (`render`); more than a binding holds is refused then. (The bundled
-/// scenes spill a few thousand fragments a step: Sierpinski at 704, 0.5 M fragments on
-/// 0.5 M lines, at most 9 000 of them in long lines.)
-pub fn initial_fragment_capacity(limits: &wgpu::Limits, resolution: u32, bound: u64) -> u64 {
-    let lines = resolution as u64 * resolution as u64;
-    bound.min((lines / 8).max(1024)).min(crate::iteration::max_capacity(limits, resolution))
+/// lines' slices) of a step at `resolution` over the bounding sphere of `radius`:
+/// `options.bundle_capacity` where set (tests), else an eighth of the lines (at least
+/// 1024), at most the geometric bound of all fragments and what one binding holds. A step
+/// that needs more has its batch redone with twice the room (`render`); more than a binding
+/// holds is refused then. (The bundled scenes spill a few thousand fragments a step:
+/// Sierpinski at 704, 0.5 M fragments on 0.5 M lines, at most 9 000 of them in long lines.)
+pub fn initial_fragment_capacity(
+    options: &RenderOptions,
+    limits: &wgpu::Limits,
+    patches: &Patches,
+    radius: f64,
+    resolution: u32,
+) -> u64 {
+    options.bundle_capacity.unwrap_or_else(|| {
+        let lines = resolution as u64 * resolution as u64;
+        let bound = crate::iteration::fragment_bound(patches, radius, resolution);
+        bound.min((lines / 8).max(1024)).min(crate::iteration::max_capacity(limits, resolution))
+    })
 }
 
 /// The most first-shot pairs a device holds, the list in pages of at most `page_bytes`
@@ -125,10 +135,7 @@ pub fn predict(
             let resolution = options.bundle_resolution_for(scene, patches);
             let r = resolution as u64;
             let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
-            let capacity = |resolution: u32| {
-                let bound = crate::iteration::fragment_bound(patches, radius, resolution);
-                options.bundle_capacity.unwrap_or_else(|| initial_fragment_capacity(limits, resolution, bound))
-            };
+            let capacity = |resolution| initial_fragment_capacity(options, limits, patches, radius, resolution);
             // The coarse burn-in's lines and fragments live beside the full grid's while it runs.
             let burn_in = crate::render::burn_in_steps(scene, options);
             let (coarse_lines, coarse_fragments) = crate::iteration::coarse_burn_in(resolution, burn_in)

@@ -8,8 +8,9 @@ use crate::gpu::profile::{Stage, StageTime, StageTimer};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{AdapterSummary, Context};
 use crate::image::Image;
-use crate::iteration::{BundleScene, Iteration, fragment_bound};
+use crate::iteration::{BundleScene, Iteration};
 use crate::layout::*;
+use crate::memory::initial_fragment_capacity;
 use crate::rng::StepRng;
 use crate::scene::{Camera, NamedCamera, Patches, Scene};
 use crate::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
@@ -615,8 +616,6 @@ pub struct Renderer<'a> {
     /// resolution, sharing the per-patch arrays, and the steps it runs (0..steps); dropped
     /// once they are done.
     coarse: Option<(Iteration, u32)>,
-    /// Its resolution and steps, kept for the statistics.
-    coarse_plan: Option<(u32, u32)>,
     /// Steps before the first one averaged into the image.
     burn_in: u32,
     /// The step whose estimate is the image's first: the burn-in, or a frame's first step
@@ -674,20 +673,14 @@ impl<'a> Renderer<'a> {
         let iteration = if options.iterations == 0 {
             None
         } else {
-            let capacity = options.bundle_capacity.unwrap_or_else(|| {
-                let bound = fragment_bound(patches, buffers.radius, bundle_resolution);
-                crate::memory::initial_fragment_capacity(&ctx.limits(), bundle_resolution, bound)
-            });
+            let capacity =
+                initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, bundle_resolution);
             Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity)?)
         };
         let burn_in = burn_in_steps(scene, options);
-        let coarse_plan = crate::iteration::coarse_burn_in(bundle_resolution, burn_in).filter(|_| iteration.is_some());
-        let coarse = match (&iteration, coarse_plan) {
+        let coarse = match (&iteration, crate::iteration::coarse_burn_in(bundle_resolution, burn_in)) {
             (Some(full), Some((resolution, steps))) => {
-                let bound = fragment_bound(patches, buffers.radius, resolution);
-                let capacity = options
-                    .bundle_capacity
-                    .unwrap_or_else(|| crate::memory::initial_fragment_capacity(&ctx.limits(), resolution, bound));
+                let capacity = initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, resolution);
                 Some((full.resized(ctx, &buffers, resolution, capacity)?, steps))
             }
             _ => None,
@@ -718,7 +711,6 @@ impl<'a> Renderer<'a> {
             views,
             iteration,
             coarse,
-            coarse_plan,
             burn_in,
             image_start: burn_in,
             direct_due: true,
@@ -1016,6 +1008,11 @@ impl<'a> Renderer<'a> {
         let image_ms = milliseconds(image_start);
         self.ctx.check()?;
         let (o, fs) = (&self.options, self.first_shot.as_ref());
+        // The coarse burn-in planned, as `new` planned it (its iteration is gone by now).
+        let coarse_plan = match self.iteration {
+            Some(_) => crate::iteration::coarse_burn_in(self.bundle_resolution, self.burn_in),
+            None => None,
+        };
         Ok(Rendered {
             interrupted: iteration_stats.interrupted || direct.interrupted,
             image: first.image,
@@ -1044,8 +1041,8 @@ impl<'a> Renderer<'a> {
                 iteration_ms: iteration_stats.ms,
                 iterations: iteration_stats.steps.saturating_sub(self.burn_in),
                 burn_in_steps: iteration_stats.steps.min(self.burn_in),
-                coarse_burn_in_steps: self.coarse_plan.map_or(0, |(_, steps)| iteration_stats.steps.min(steps)),
-                coarse_bundle_resolution: self.coarse_plan.map(|(resolution, _)| resolution),
+                coarse_burn_in_steps: coarse_plan.map_or(0, |(_, steps)| iteration_stats.steps.min(steps)),
+                coarse_bundle_resolution: coarse_plan.map(|(resolution, _)| resolution),
                 seed: o.seed,
                 tessellation_ms: 0.0,
                 upload_ms: self.upload_ms,
