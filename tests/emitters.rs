@@ -255,7 +255,7 @@ fn test03_closed_furnace_of_first_shot_emitters_stays_exact_on_average() {
     // per_pixel test03's furnace (every surface emits 1 and reflects half: the radiance is 2
     // everywhere), now with every surface a first-shot light: the first shot carries the
     // first reflection, the per-pixel direct light the emitters' light at every pixel.
-    let text = format!("{}{}", common::scenes::HALF_FURNACE, common::scenes::HALF_FURNACE_INNER_BOX);
+    let text = common::scenes::half_furnace(true);
     let (_scratch, scene) = load("furnace", &text);
     let Some(ctx) = common::gpu() else { return };
     let mut options = RenderOptions::from_scene(&scene);

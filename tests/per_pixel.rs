@@ -191,7 +191,7 @@ fn test02_area_light_penumbra_converges_to_the_integral_over_the_light() {
 fn test03_closed_furnace_with_an_occluder_stays_exact() {
     // Every surface emits 1 and reflects half: the radiance is 2 everywhere, seen from
     // anywhere, also in the contact region of the inner box and the floor.
-    let text = format!("{}{}", common::scenes::HALF_FURNACE, common::scenes::HALF_FURNACE_INNER_BOX);
+    let text = common::scenes::half_furnace(true);
     let (_scratch, scene) = load("furnace", &text);
     let Some(ctx) = common::gpu() else { return };
     let mut options = RenderOptions::from_scene(&scene);
@@ -220,37 +220,8 @@ fn test06_bright_furnace_with_a_box_on_the_floor_keeps_its_light() {
     // patches that reach under the box average in its dark enclosed inside, and each
     // reflection multiplies the loss: measured -2.5% (seeds 1-3: 9.72, 9.74, 9.78). With
     // them: 9.92, 9.94, 9.98 (what is left is the gather near the contact, ALGORITHM.md 6).
-    let text = r#"
-format = 1
-[camera]
-position = [0.1, 0.6, -0.9]
-look_at = [0.0, -0.4, 0.5]
-up = [0.0, 1.0, 0.0]
-fov_y = 70.0
-width = 32
-height = 32
-[settings]
-patch_size = 0.4
-bundle_resolution = 256
-hemicube_resolution = 128
-[materials.bright]
-type = "diffuse"
-albedo = [0.9, 0.9, 0.9]
-[[shapes]]
-type = "box"
-min = [-1.0, -1.0, -1.0]
-max = [1.0, 1.0, 1.0]
-material = "bright"
-two_sided = true
-emission = [1.0, 1.0, 1.0]
-[[shapes]]
-type = "box"
-min = [-0.3, -1.0, -0.3]
-max = [0.3, 0.2, 0.3]
-material = "bright"
-emission = [1.0, 1.0, 1.0]
-"#;
-    let (_scratch, scene) = load("bright_furnace_box", text);
+    let text = common::scenes::closed_furnace(0.9, 256, true);
+    let (_scratch, scene) = load("bright_furnace_box", &text);
     let Some(ctx) = common::gpu() else { return };
     let patches = scene::tessellate(&scene, scene.settings.patch_size).unwrap();
     let mut means = Vec::new();
@@ -460,8 +431,8 @@ fn test10_the_gathers_control_variate_removes_the_projected_area_noise() {
     // wall): measured RMS errors 0.12-0.22 over seeds 1-4 before the control variate. With
     // it, 2 kd (|n . d| L - (|n . d| - 1/2) Lbar_j) is exact wherever L = Lbar_j; measured
     // 0.024-0.026 (what is left: Lbar_j's own noise, edges and corners).
-    let text = common::scenes::HALF_FURNACE;
-    let (_scratch, scene) = load("furnace_cv", text);
+    let text = common::scenes::half_furnace(false);
+    let (_scratch, scene) = load("furnace_cv", &text);
     let Some(ctx) = common::gpu() else { return };
     let patches = scene::tessellate(&scene, scene.settings.patch_size).unwrap();
     for seed in [1, 2] {

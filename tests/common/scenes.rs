@@ -30,9 +30,13 @@ position = [0, 3, 0]
 power = [10, 10, 10]
 "#;
 
-/// A closed furnace: a 2 x 2 x 2 room whose walls emit 1 and reflect half on both sides,
-/// so the radiance is exactly 2 everywhere, seen from inside by a 32 x 32 camera.
-pub const HALF_FURNACE: &str = r#"
+/// A closed furnace: a 2 x 2 x 2 room whose walls emit 1 and reflect `albedo` on both sides,
+/// so the radiance is exactly 1 / (1 - albedo) everywhere, seen from inside by a 32 x 32
+/// camera; with `inner_box`, a box standing on the floor that emits and reflects as the room
+/// (the radiance stays the same, also at the contact).
+pub fn closed_furnace(albedo: f64, bundle_resolution: u32, inner_box: bool) -> String {
+    let mut text = format!(
+        r#"
 format = 1
 [camera]
 position = [0.1, 0.6, -0.9]
@@ -43,30 +47,39 @@ width = 32
 height = 32
 [settings]
 patch_size = 0.4
-bundle_resolution = 128
+bundle_resolution = {bundle_resolution}
 hemicube_resolution = 128
-[materials.half]
+[materials.wall]
 type = "diffuse"
-albedo = [0.5, 0.5, 0.5]
+albedo = [{albedo}, {albedo}, {albedo}]
 [[shapes]]
 type = "box"
 min = [-1.0, -1.0, -1.0]
 max = [1.0, 1.0, 1.0]
-material = "half"
+material = "wall"
 two_sided = true
 emission = [1.0, 1.0, 1.0]
-"#;
-
-/// HALF_FURNACE's second shape, a box standing on the floor (emitting and reflecting as the
-/// room: the radiance stays 2, also at the contact).
-pub const HALF_FURNACE_INNER_BOX: &str = r#"
+"#
+    );
+    if inner_box {
+        text.push_str(
+            r#"
 [[shapes]]
 type = "box"
 min = [-0.3, -1.0, -0.3]
 max = [0.3, 0.2, 0.3]
-material = "half"
+material = "wall"
 emission = [1.0, 1.0, 1.0]
-"#;
+"#,
+        );
+    }
+    text
+}
+
+/// The furnace of albedo one half (radiance 2) at bundle resolution 128.
+pub fn half_furnace(inner_box: bool) -> String {
+    closed_furnace(0.5, 128, inner_box)
+}
 
 /// MINIMAL with each `(from, to)` replaced once (each `from` must occur).
 pub fn edited(edits: &[(&str, &str)]) -> String {
