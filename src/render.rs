@@ -686,6 +686,9 @@ impl<'a> Renderer<'a> {
             _ => None,
         };
         let gathers = iteration.is_some();
+        // Only a first-shot emitting shape's light is shared between D and G; without one the
+        // gather skips the test (two loads of the sender's patch a pixel).
+        let mis = gathers && options.first_shot && !patches.emitters.is_empty();
         let views = options
             .views(scene)
             .into_iter()
@@ -696,7 +699,7 @@ impl<'a> Renderer<'a> {
                     .image_band_rows
                     .unwrap_or_else(|| crate::stages::image_estimate::band_rows(&device.limits(), camera.width));
                 let estimate = ImageEstimate::new(device, &buffers, &item_buffer, &direct, gather, band_rows);
-                estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), gathers);
+                estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis);
                 ViewImage { name, camera, item_buffer, estimate }
             })
             .collect();
@@ -774,9 +777,10 @@ impl<'a> Renderer<'a> {
         let mut rng =
             self.iteration_at(k).write_bundle(queue, self.options.seed, k as u64, image_step, &self.bundle_scene());
         if image_step {
-            let jitter = [rng.uniform() as f32, rng.uniform() as f32];
-            self.write_camera(jitter);
             let i = k - self.image_start;
+            let u = [rng.uniform(), rng.uniform()];
+            let jitter = crate::rng::stratified_pixel_sample(self.options.seed, i as u64, u);
+            self.write_camera([jitter[0] as f32, jitter[1] as f32]);
             self.direct_due = direct_light_due(i, &self.options);
             if self.direct_due {
                 let pass = direct_light_estimates(i, &self.options) as u64;

@@ -50,14 +50,7 @@ pub fn stratified_direction(seed: u64, step: u64) -> glam::DVec3 {
     let block = step / DIRECTION_BLOCK;
     let mut rng = StepRng::new(seed, BLOCK_STREAM - block);
     let shift = [rng.uniform(), rng.uniform()];
-    // The position of `step` in the block's random order (Fisher-Yates, drawn in full so
-    // that it depends on the block alone).
-    let mut order: Vec<u64> = (0..DIRECTION_BLOCK).collect();
-    for i in (1..order.len()).rev() {
-        let pick = ((rng.uniform() * (i + 1) as f64) as usize).min(i);
-        order.swap(i, pick);
-    }
-    let v = order[(step % DIRECTION_BLOCK) as usize] as f64;
+    let v = shuffled(&mut rng, DIRECTION_BLOCK, step % DIRECTION_BLOCK) as f64;
     const A1: f64 = 0.754_877_666_246_692_7;
     const A2: f64 = 0.569_840_290_998_053_3;
     let (u1, u2) = ((shift[0] + v * A1).fract(), (shift[1] + v * A2).fract());
@@ -65,6 +58,40 @@ pub fn stratified_direction(seed: u64, step: u64) -> glam::DVec3 {
     let phi = 2.0 * std::f64::consts::PI * u2;
     let r = (1.0 - z * z).max(0.0).sqrt();
     glam::DVec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Element `index` of a random permutation of 0..len drawn from `rng` (Fisher-Yates, drawn
+/// in full so that it depends on the generator alone, not on `index`).
+fn shuffled(rng: &mut StepRng, len: u64, index: u64) -> u64 {
+    let mut order: Vec<u64> = (0..len).collect();
+    for i in (1..order.len()).rev() {
+        let pick = ((rng.uniform() * (i + 1) as f64) as usize).min(i);
+        order.swap(i, pick);
+    }
+    order[index as usize]
+}
+
+/// Side of the grid of strata of the camera's sample inside a pixel: a block of
+/// PIXEL_STRATA^2 image steps puts one sample in each stratum.
+pub const PIXEL_STRATA: u64 = 4;
+/// Generator streams of the camera samples' blocks, apart from the steps' and the
+/// directions' blocks.
+const PIXEL_STREAM: u64 = u64::MAX / 2;
+
+/// The camera's sample inside every pixel (x right, y down, in [0, 1)) at image step
+/// `image_step`, from the step's uniforms `u`: uniform over the pixel, and stratified over
+/// blocks of PIXEL_STRATA^2 image steps, which visit the strata of a PIXEL_STRATA x
+/// PIXEL_STRATA grid once each in the block's random order, with `u` placing the sample
+/// within its stratum. Along a geometric edge a pixel's value then converges as a
+/// stratified mean (the share of the pixel each side covers) instead of a random one; the
+/// random order keeps the samples independent of the other stratified sequences (the
+/// bundle directions, the area lights' points), so that no pairing of them repeats.
+pub fn stratified_pixel_sample(seed: u64, image_step: u64, u: [f64; 2]) -> [f64; 2] {
+    let cells = PIXEL_STRATA * PIXEL_STRATA;
+    let mut rng = StepRng::new(seed, PIXEL_STREAM - image_step / cells);
+    let cell = shuffled(&mut rng, cells, image_step % cells);
+    let n = PIXEL_STRATA as f64;
+    [((cell % PIXEL_STRATA) as f64 + u[0]) / n, ((cell / PIXEL_STRATA) as f64 + u[1]) / n]
 }
 
 #[cfg(test)]
@@ -92,6 +119,41 @@ mod tests {
         }
         // Another seed, other directions.
         assert_ne!(stratified_direction(5, 3), stratified_direction(6, 3));
+    }
+
+    #[test]
+    fn pixel_samples_fill_each_stratum_once_a_block() {
+        let cells = PIXEL_STRATA * PIXEL_STRATA;
+        let mut sum = [0.0; 2];
+        let blocks = 64;
+        for block in 0..blocks {
+            let mut seen = vec![0; cells as usize];
+            for i in 0..cells {
+                let step = block * cells + i;
+                let mut r = StepRng::new(3, step);
+                let p = stratified_pixel_sample(3, step, [r.uniform(), r.uniform()]);
+                assert!(p.iter().all(|&c| (0.0..1.0).contains(&c)), "{p:?}");
+                let n = PIXEL_STRATA as f64;
+                seen[((p[1] * n) as u64 * PIXEL_STRATA + (p[0] * n) as u64) as usize] += 1;
+                sum[0] += p[0];
+                sum[1] += p[1];
+            }
+            assert!(seen.iter().all(|&c| c == 1), "block {block}: {seen:?}");
+        }
+        // Uniform: the mean of 1024 stratified points is 1/2 within a few 1e-3.
+        let n = (blocks * cells) as f64;
+        assert!((sum[0] / n - 0.5).abs() < 0.005 && (sum[1] / n - 0.5).abs() < 0.005, "{sum:?}");
+        // The order differs from block to block and from seed to seed.
+        let first = |seed: u64, block: u64| -> Vec<u64> {
+            (0..cells)
+                .map(|i| {
+                    let p = stratified_pixel_sample(seed, block * cells + i, [0.5, 0.5]);
+                    (p[1] * 4.0) as u64 * 4 + (p[0] * 4.0) as u64
+                })
+                .collect()
+        };
+        assert_ne!(first(3, 0), first(3, 1));
+        assert_ne!(first(3, 0), first(4, 0));
     }
 
     #[test]

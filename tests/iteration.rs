@@ -276,7 +276,11 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
     assert!(moved > last.len(), "the furnace's patches receive light ({moved})");
     // The reflection reads every entry: its unrolled sum has one term per entry.
     let reflect = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/wgsl/bundle_reflect.wgsl")).unwrap();
-    assert_eq!(reflect.matches("earlier_glossy(m, n, s.earlier[").count(), GLOSSY_HISTORY, "bundle_reflect.wgsl");
+    assert_eq!(
+        reflect.matches("earlier_glossy(m, n, state_at(j).earlier[").count(),
+        GLOSSY_HISTORY,
+        "bundle_reflect.wgsl"
+    );
 }
 
 #[test]

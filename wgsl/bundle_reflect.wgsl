@@ -52,29 +52,35 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     var image_o = o;
     var mean_radiance = vec3<f32>(0.0);
     if (bundle.use_state != 0u) {
-        let s = state_at(j);
-        mean_radiance = s.mean_radiance.rgb;
-        let glossy = glossy_reflection(m, n, s.incoming.rgb, -s.direction.xyz, w_out);
-        o += 2.0 * m.diffuse.rgb * s.diffuse.rgb + glossy;
-        var mean = s.diffuse.rgb;
-        if (s.diffuse_sum.w > 0.0) {
-            mean = s.diffuse_sum.rgb / s.diffuse_sum.w;
-        }
-        var image_glossy = glossy;
+        // Field by field, and the glossy history only for a glossy patch: a CPU adapter loads
+        // every field of a whole-struct read.
+        mean_radiance = state_at(j).mean_radiance.rgb;
+        let diffuse = state_at(j).diffuse.rgb;
+        let diffuse_sum = state_at(j).diffuse_sum;
+        var glossy = vec3<f32>(0.0);
+        var image_glossy = vec3<f32>(0.0);
         if (m.kind == MATERIAL_PHONG) {
+            let incoming = state_at(j).incoming;
+            glossy = glossy_reflection(m, n, incoming.rgb, -state_at(j).direction.xyz, w_out);
+            image_glossy = glossy;
             // Unrolled, for GLOSSY_HISTORY entries: a CPU adapter runs a data-dependent loop
             // many times slower.
-            let written = u32(s.incoming.w);
+            let written = u32(incoming.w);
             if (written > 0u) {
-                image_glossy += earlier_glossy(m, n, s.earlier[0], w_out);
+                image_glossy += earlier_glossy(m, n, state_at(j).earlier[0], w_out);
             }
             if (written > 1u) {
-                image_glossy += earlier_glossy(m, n, s.earlier[1], w_out);
+                image_glossy += earlier_glossy(m, n, state_at(j).earlier[1], w_out);
             }
             if (written > 2u) {
-                image_glossy += earlier_glossy(m, n, s.earlier[2], w_out);
+                image_glossy += earlier_glossy(m, n, state_at(j).earlier[2], w_out);
             }
             image_glossy /= f32(1u + written);
+        }
+        o += 2.0 * m.diffuse.rgb * diffuse + glossy;
+        var mean = diffuse;
+        if (diffuse_sum.w > 0.0) {
+            mean = diffuse_sum.rgb / diffuse_sum.w;
         }
         image_o += 2.0 * m.diffuse.rgb * mean + image_glossy;
     }

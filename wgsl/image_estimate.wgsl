@@ -216,10 +216,13 @@ fn light_share(r2: f32, cos_l: f32, pick_area: f32) -> f32 {
 // unless m belongs to a first-shot emitting shape (whose emission the iteration leaves out)
 // and the image gathers.
 fn emitted_share(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
+    if (params.mis == 0u) {
+        return vec3<f32>(0.0);
+    }
     let pick_area = patches_at(m).light_pick_area;
     let plane = patches_at(m).normal;
     let cos_l = -dot(plane.xyz, toward);
-    if (params.mis == 0u || pick_area <= 0.0 || cos_l <= 0.0) {
+    if (pick_area <= 0.0 || cos_l <= 0.0) {
         return vec3<f32>(0.0);
     }
     let t = abs((plane.w - dot(plane.xyz, x)) / cos_l);
@@ -370,6 +373,23 @@ fn line_of(x: vec3<f32>) -> OnLine {
     return OnLine(begin, end, begin, false);
 }
 
+// One halving of a lower-bound search for `key` over the n fragments from `base`, applied
+// four times (enough for n <= 8): (base, n) of the part that still holds the first fragment
+// at or past key.
+fn halve(at: vec2<u32>, key: f32) -> vec2<u32> {
+    let base = at.x;
+    let n = at.y;
+    let half = n / 2u;
+    if (n > 0u && bitcast<f32>(fragments[base + half].x) < key) {
+        return vec2<u32>(base + half + 1u, n - half - 1u);
+    }
+    return vec2<u32>(base, half);
+}
+
+fn lower_half(base: u32, n: u32, key: f32) -> vec2<u32> {
+    return halve(halve(halve(halve(vec2<u32>(base, n), key), key), key), key);
+}
+
 fn on_line(x: vec3<f32>, s: f32) -> OnLine {
     var line = line_of(x);
     if (line.outside) {
@@ -381,8 +401,15 @@ fn on_line(x: vec3<f32>, s: f32) -> OnLine {
     let slack = 0.75 * sqrt(bundle.direction.w);
     let start_depth = depth - s * slack;
     // First fragment at or past start_depth in the direction of travel (binary search over
-    // the sorted line).
+    // the sorted line). A line within its bucket (LINE_BUCKET = 8 places, nearly every line)
+    // takes four fixed halvings: a CPU adapter runs a data-dependent loop over storage many
+    // times slower.
     var lo = line.begin;
+    var n = line.end - line.begin;
+    if (n <= LINE_BUCKET) {
+        lo = lower_half(lo, n, start_depth).x;
+        return OnLine(line.begin, line.end, lo, false);
+    }
     var hi = line.end;
     while (lo < hi) {
         let mid = (lo + hi) / 2u;

@@ -23,7 +23,7 @@ use clap::{Parser, ValueEnum};
 use firstshot::gpu::profile::TIMESTAMP_FEATURES;
 use firstshot::gpu::{AdapterChoice, AdapterSummary, Context, context::list_adapters};
 use firstshot::render::RenderOptions;
-use firstshot::scene::{Patches, Scene};
+use firstshot::scene::{Camera, NamedCamera, Patches, Scene};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -78,6 +78,11 @@ struct Args {
     /// Override the scenes' bundle resolution (throughput and convergence).
     #[arg(long, value_name = "R")]
     bundle_resolution: Option<u32>,
+    /// Render every camera of each scene (`[camera]` and its `[[cameras]]`) in each step, as
+    /// `firstshot --all-cameras` does (throughput: the stage profile then shows each view's
+    /// image stages).
+    #[arg(long)]
+    all_cameras: bool,
     /// Steps of the long runs the convergence study measures against (default 2000;
     /// --quick 64).
     #[arg(long, value_name = "N")]
@@ -145,6 +150,7 @@ pub struct Config {
     pub repeats: usize,
     pub steps: u32,
     pub bundle_resolution: Option<u32>,
+    pub all_cameras: bool,
     pub first_shot: bool,
     pub long_steps: u32,
     pub series: Vec<u32>,
@@ -173,6 +179,17 @@ impl Config {
             o.bundle_resolution = Some(r);
         }
         o.first_shot = self.first_shot;
+        if self.all_cameras {
+            // Every camera at the run's image size, as `firstshot --all-cameras --width W --height H`.
+            o.cameras = scene
+                .cameras
+                .iter()
+                .map(|c| NamedCamera {
+                    name: c.name.clone(),
+                    camera: Camera { width: o.width, height: o.height, ..c.camera },
+                })
+                .collect();
+        }
         o
     }
 }
@@ -422,6 +439,7 @@ fn main() -> ExitCode {
         repeats: args.repeats.unwrap_or(if quick { 1 } else { 5 }).max(1),
         steps: args.steps.unwrap_or(if quick { 8 } else { 40 }).max(1),
         bundle_resolution: args.bundle_resolution,
+        all_cameras: args.all_cameras,
         first_shot: !args.no_first_shot,
         long_steps: args.long_steps.unwrap_or(if quick { 64 } else { 2000 }).max(1),
         series: args.series.clone().unwrap_or(if quick {

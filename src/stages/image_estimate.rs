@@ -262,8 +262,9 @@ impl ImageEstimate {
     }
 
     /// What the estimate adds where no surface is, how many direct lights it evaluates, and
-    /// whether the image gathers too (`mis`: the emitting shapes' direct light is then shared
-    /// between D and G, docs/ALGORITHM.md 6; a direct-light image must not share it).
+    /// whether the emitting shapes' direct light is shared between D and G (`mis`,
+    /// docs/ALGORITHM.md 6: only where the image gathers and the scene has first-shot emitting
+    /// shapes; a direct-light image must not share it).
     pub fn set_params(
         &self,
         queue: &wgpu::Queue,

@@ -22,12 +22,13 @@ fn first_shot_radiance(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: v
     var sum = vec3<f32>(0.0);
     for (var e = fs_offsets[j]; e < fs_offsets[j + 1u]; e++) {
         let entry = fs_entries[e];
-        let s = samples[entry.x];
-        var w_in = normalize(s.position.xyz - x);
-        if (s.kind == LIGHT_DIRECTIONAL) {
-            w_in = -s.normal.xyz;
+        // Field by field: a CPU adapter loads every field of a whole-struct read.
+        let i = entry.x;
+        var w_in = normalize(samples[i].position.xyz - x);
+        if (samples[i].kind == LIGHT_DIRECTIONAL) {
+            w_in = -samples[i].normal.xyz;
         }
-        sum += s.strength.rgb * bitcast<f32>(entry.y) * brdf(m, n, w_in, w_out);
+        sum += samples[i].strength.rgb * bitcast<f32>(entry.y) * brdf(m, n, w_in, w_out);
     }
     return sum;
 }
