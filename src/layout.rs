@@ -55,6 +55,9 @@ pub const VIEW_ORTHOGRAPHIC: u32 = 1;
 /// material without a specular lobe is uploaded as diffuse: it is exactly Lambertian.
 pub const MATERIAL_DIFFUSE: u32 = 0;
 pub const MATERIAL_PHONG: u32 = 1;
+/// Samples of each material's glossy-lobe albedo table (`scene::brdf::glossy_albedo_table`):
+/// at cos theta = (i / (GLOSSY_ALBEDO_SAMPLES - 1))^2.
+pub const GLOSSY_ALBEDO_SAMPLES: u32 = 129;
 /// The most patches a scene may have (ids must leave the twin bit free).
 pub const MAX_PATCHES: u32 = 1 << 27;
 
@@ -354,6 +357,7 @@ pub fn wgsl_constants() -> String {
          const VIEW_ORTHOGRAPHIC: u32 = {VIEW_ORTHOGRAPHIC}u;\n\
          const MATERIAL_DIFFUSE: u32 = {MATERIAL_DIFFUSE}u;\n\
          const MATERIAL_PHONG: u32 = {MATERIAL_PHONG}u;\n\
+         const GLOSSY_ALBEDO_SAMPLES: u32 = {GLOSSY_ALBEDO_SAMPLES}u;\n\
          const PREFIX_SUM_WORKGROUP: u32 = {PREFIX_SUM_WORKGROUP}u;\n\
          const PREFIX_SUM_PER_THREAD: u32 = {PREFIX_SUM_PER_THREAD}u;\n\
          const GLOSSY_HISTORY: u32 = {GLOSSY_HISTORY}u;\n\

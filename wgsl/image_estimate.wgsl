@@ -39,6 +39,7 @@
 @group(0) @binding(4) var<storage, read> materials: array<Material>;
 @group(0) @binding(5) var<storage, read_write> image_sum: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> edges: array<atomic<u32>>;
+@group(0) @binding(7) var<storage, read> glossy_albedo: array<f32>;
 @group(1) @binding(0) var<storage, read> lights: array<DirectLight>;
 @group(1) @binding(1) var<storage, read> faces: array<WindowFace>;
 @group(1) @binding(2) var kept_atlas: texture_2d<u32>;
@@ -566,9 +567,26 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }
 
+// The glossy lobe's directional albedo for ks = 1 at cos theta = mu on material k: its table
+// (scene::brdf::glossy_albedo_table), linear in sqrt(mu) between the samples.
+fn lobe_albedo(k: u32, mu: f32) -> f32 {
+    let t = sqrt(clamp(mu, 0.0, 1.0)) * f32(GLOSSY_ALBEDO_SAMPLES - 1u);
+    let i = min(u32(t), GLOSSY_ALBEDO_SAMPLES - 2u);
+    let at = k * GLOSSY_ALBEDO_SAMPLES + i;
+    return mix(glossy_albedo[at], glossy_albedo[at + 1u], t - f32(i));
+}
+
+// The weight c of the glossy lobe's control variate c Lbar_j (docs/ALGORITHM.md 6). Below 1:
+// where the lobe looks at light far from the mean Lbar_j (a dark or bright mirror
+// direction), the variate with c = 1 adds variance; c = 1/2 still removes three quarters of
+// it where L is Lbar_j and never adds more than the plain estimate has unless the mirror
+// direction sees less than a quarter of Lbar_j.
+const GLOSSY_CONTROL: f32 = 0.5;
+
 // G at x from what it receives from `toward` (= s d, density 1 / (2 pi) on x's hemisphere).
 fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
-    let m = materials[patches_at(at.j).material];
+    let k = patches_at(at.j).material;
+    let m = materials[k];
     let cos_d = abs(dot(at.n, toward));
     // The diffuse part with the control variate of the state's K_j (bundle_finalize):
     // 2 pi (kd / pi) (|n . d| L - (|n . d| - 1/2) Lbar_j) has the mean of
@@ -577,8 +595,17 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
     // it has almost none of the variance of the factor |n . d|.
     let mean = image_mean_radiance_at(at.j).rgb;
     var radiance = 2.0 * m.diffuse.rgb * (cos_d * incoming - (cos_d - 0.5) * mean);
-    if (dot(at.n, toward) > 0.0 && dot(at.n, at.w_out) > 0.0) {
-        radiance += 2.0 * PI * incoming * cos_d * brdf_glossy(m, at.n, toward, at.w_out);
+    if (m.kind == MATERIAL_PHONG) {
+        // The glossy part likewise: 2 pi |n . d| f_glossy(-s d, w_out) has the mean
+        // ks S(n . w_out) over x's hemisphere (the lobe's albedo, by reciprocity the same at
+        // exitance), so 2 pi (L - c Lbar_j) |n . d| f_glossy + c Lbar_j ks S keeps the mean of
+        // 2 pi L |n . d| f_glossy while the lobe's shape, which a uniform direction samples
+        // badly, leaves only (L - c Lbar_j) to vary.
+        let base = GLOSSY_CONTROL * mean;
+        if (dot(at.n, toward) > 0.0) {
+            radiance += 2.0 * PI * (incoming - base) * cos_d * brdf_glossy(m, at.n, toward, at.w_out);
+        }
+        radiance += base * m.specular.rgb * lobe_albedo(k, dot(at.n, at.w_out));
     }
     return radiance;
 }

@@ -179,6 +179,8 @@ pub struct SceneBuffers {
     pub page_bytes: u64,
     pub patches: Paged,
     pub materials: wgpu::Buffer,
+    /// `gpu_glossy_albedo`: the gather's control variate of the glossy lobe.
+    pub glossy_albedo: wgpu::Buffer,
     pub samples: wgpu::Buffer,
     pub sample_count: u32,
     /// Three `RasterVertex` per patch, in patch order.
@@ -213,6 +215,25 @@ pub fn gpu_materials(scene: &Scene) -> Vec<GpuMaterial> {
         })
         .collect();
     out.push(GpuMaterial::zeroed());
+    out
+}
+
+/// Each GPU material's glossy-lobe albedo table (`scene::brdf::glossy_albedo_table`, for
+/// ks = 1), `GLOSSY_ALBEDO_SAMPLES` floats a material in the order of `gpu_materials`; zeros
+/// for a material without a glossy lobe.
+pub fn gpu_glossy_albedo(scene: &Scene) -> Vec<f32> {
+    let n = GLOSSY_ALBEDO_SAMPLES as usize;
+    let mut out: Vec<f32> = Vec::with_capacity((scene.materials.len() + 1) * n);
+    for (m, gpu) in scene.materials.iter().zip(gpu_materials(scene)) {
+        match m.kind {
+            MaterialKind::Phong { shininess, .. } if gpu.kind == MATERIAL_PHONG => {
+                out.extend(crate::scene::brdf::glossy_albedo_table(f64::from(shininess)))
+            }
+            _ => out.extend(std::iter::repeat_n(0.0, n)),
+        }
+    }
+    // The black material's.
+    out.extend(std::iter::repeat_n(0.0, n));
     out
 }
 
@@ -347,6 +368,12 @@ impl SceneBuffers {
             page_bytes,
             patches: Paged::init(device, "firstshot.scene.patches", PATCH_TABLE, &gpu, page_bytes, none),
             materials: buffers::storage_init(device, "firstshot.scene.materials", &gpu_materials(scene), none),
+            glossy_albedo: buffers::storage_init(
+                device,
+                "firstshot.scene.glossy_albedo",
+                &gpu_glossy_albedo(scene),
+                none,
+            ),
             samples: buffers::storage_init(device, "firstshot.scene.light_samples", &samples, none),
             sample_count: samples.len() as u32,
             vertices: buffers::storage_init(

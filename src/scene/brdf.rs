@@ -49,6 +49,32 @@ pub fn directional_albedo(kind: &MaterialKind, cos_theta_in: f64) -> [f64; 3] {
     }
 }
 
+/// The glossy lobe's directional albedo for ks = 1 (`lobe_albedo`, the same at incidence and
+/// exitance by reciprocity) at cos theta = (i / (N - 1))^2, i = 0..N, N =
+/// `layout::GLOSSY_ALBEDO_SAMPLES`: the gather's control variate needs it at every pixel
+/// (docs/ALGORITHM.md 6), where the quadrature is far too slow. The samples are dense toward
+/// grazing, where a sharp lobe's albedo changes fastest; linear interpolation in
+/// sqrt(cos theta) (`glossy_albedo_lookup`, as the WGSL does) stays within 6e-4 of the
+/// quadrature for shininess 0 to 10^4.
+pub fn glossy_albedo_table(shininess: f64) -> Vec<f32> {
+    let n = crate::layout::GLOSSY_ALBEDO_SAMPLES as usize;
+    (0..n)
+        .map(|i| {
+            let t = i as f64 / (n - 1) as f64;
+            lobe_albedo(shininess, t * t) as f32
+        })
+        .collect()
+}
+
+/// The value `table` (`glossy_albedo_table`) gives at cos theta = `mu`, interpolated as the
+/// WGSL's `lobe_albedo` does.
+pub fn glossy_albedo_lookup(table: &[f32], mu: f64) -> f64 {
+    let t = mu.clamp(0.0, 1.0).sqrt() * (table.len() - 1) as f64;
+    let i = (t as usize).min(table.len() - 2);
+    let f = t - i as f64;
+    f64::from(table[i]) * (1.0 - f) + f64::from(table[i + 1]) * f
+}
+
 /// The largest directional albedo over all incident angles, per channel. A material whose
 /// value exceeds 1 in any channel gains energy and is refused by the loader.
 pub fn max_directional_albedo(kind: &MaterialKind) -> Rgb {
@@ -348,6 +374,30 @@ mod tests {
         let mean = sum / samples as f64;
         let variance = (sum2 / samples as f64 - mean * mean) / (samples as f64 - 1.0);
         (mean, variance.sqrt())
+    }
+
+    #[test]
+    fn test09_the_glossy_albedo_table_interpolates_the_quadrature() {
+        // Between the samples, over the shininesses a scene may use, including the sharp
+        // lobes whose albedo drops within a few degrees of grazing.
+        for n in [0.0, 0.5, 1.0, 3.0, 10.0, 60.0, 100.0, 1000.0, 10_000.0] {
+            let table = glossy_albedo_table(n);
+            assert_eq!(table.len(), crate::layout::GLOSSY_ALBEDO_SAMPLES as usize);
+            let worst = (0..4000)
+                .map(|k| {
+                    let mu = (k as f64 + 0.5) / 4000.0;
+                    let exact = lobe_albedo(n, mu);
+                    ((glossy_albedo_lookup(&table, mu) - exact) / exact).abs()
+                })
+                .fold(0.0, f64::max);
+            assert!(worst < 1e-3, "shininess {n}: interpolation {worst:.2e} off the quadrature");
+            // The ends are the closed forms (for n > 0; n = 0 is 2 pi (1 - mu / 2)): 2 pi /
+            // (n + 2) at normal incidence, pi / (n + 1) at grazing, to f32 rounding.
+            let ends = if n > 0.0 { [PI / (n + 1.0), 2.0 * PI / (n + 2.0)] } else { [2.0 * PI, PI] };
+            for (mu, end) in [0.0, 1.0].into_iter().zip(ends) {
+                assert!((glossy_albedo_lookup(&table, mu) / end - 1.0).abs() < 1e-6, "shininess {n}, mu {mu}");
+            }
+        }
     }
 
     #[test]

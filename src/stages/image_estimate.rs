@@ -34,6 +34,9 @@ pub const SPEC: KernelSpec = KernelSpec {
             // its patch's edge): [0] their count, then per pixel its index and its place on
             // its line; `gather` lists them, `gather_edges` estimates them.
             read_write::<u32>("edges"),
+            // Each material's glossy-lobe albedo table (`scene_buffers::gpu_glossy_albedo`):
+            // the control variate of the gather's glossy part.
+            read::<f32>("glossy_albedo"),
         ],
         // The direct light (`direct_light::DirectLights`).
         &[
@@ -148,6 +151,7 @@ impl ImageEstimate {
                             ("materials", (&scene.materials).into()),
                             ("image_sum", (&sums[half]).into()),
                             ("edges", (&edges).into()),
+                            ("glossy_albedo", (&scene.glossy_albedo).into()),
                         ],
                     )
                 });
