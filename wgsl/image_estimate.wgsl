@@ -180,27 +180,44 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
         // Outside the window (below an area light's plane): nothing reaches x.
         return false;
     }
-    // The 2 x 2 texels whose centres surround the direction, clamped to the face; each
-    // distinct surface among them is tested once.
     let last = vec2<i32>(i32(side) - 1, i32(tile.z) - 1);
+    let origin = vec2<i32>(tile.xy);
+    if (faces[f].view.size.z != VIEW_ORTHOGRAPHIC) {
+        // The 3 x 3 texels around the one that holds the direction, each surface tested
+        // exactly against the segment. The 2 x 2 whose centres surround the direction
+        // missed a triangle whose corner pokes between them without covering a centre: the
+        // Sierpinski scene's direct light was 0.81 % off Mitsuba's, 93 % of it too bright;
+        // 0.59 % with 3 x 3, 0.55 % with 4 x 4, for about 8 % more time per direct pass.
+        let centre = vec2<i32>(floor(pixel));
+        for (var dy = -1; dy <= 1; dy++) {
+            for (var dx = -1; dx <= 1; dx++) {
+                let at = clamp(centre + vec2<i32>(dx, dy), vec2<i32>(0), last);
+                if (blocks(atlas_id(tile.w, origin + at), j, y, x, false)) {
+                    return false;
+                }
+            }
+        }
+        return true;
+    }
+    // A sun: the 2 x 2 texels whose centres surround x's projection, clamped to the view;
+    // each distinct surface among them is tested once, by its plane (a wider neighbourhood
+    // would widen the band along an occluder's outline that its plane darkens).
     let lo = clamp(vec2<i32>(floor(pixel - vec2<f32>(0.5))), vec2<i32>(0), last);
     let hi = min(lo + vec2<i32>(1), last);
-    let origin = vec2<i32>(tile.xy);
     let a = atlas_id(tile.w, origin + lo);
     let b = atlas_id(tile.w, origin + vec2<i32>(hi.x, lo.y));
     let c = atlas_id(tile.w, origin + vec2<i32>(lo.x, hi.y));
     let d = atlas_id(tile.w, origin + hi);
-    let by_plane = faces[f].view.size.z == VIEW_ORTHOGRAPHIC;
-    if (blocks(a, j, y, x, by_plane)) {
+    if (blocks(a, j, y, x, true)) {
         return false;
     }
-    if (b != a && blocks(b, j, y, x, by_plane)) {
+    if (b != a && blocks(b, j, y, x, true)) {
         return false;
     }
-    if (c != a && c != b && blocks(c, j, y, x, by_plane)) {
+    if (c != a && c != b && blocks(c, j, y, x, true)) {
         return false;
     }
-    return d == a || d == b || d == c || !blocks(d, j, y, x, by_plane);
+    return d == a || d == b || d == c || !blocks(d, j, y, x, true);
 }
 
 // Multiple importance sampling of an emitting shape's light (docs/ALGORITHM.md 6): the
