@@ -439,10 +439,9 @@ impl Iteration {
         Ok(counts.iter().map(|&c| c as u64).sum())
     }
 
-    /// The last step's spill nodes and long-line fragments (`tally`).
-    pub fn tally(&self, ctx: &Context) -> Result<[u32; 2]> {
-        let t = buffers::read_back::<u32>(&ctx.device, &ctx.queue, &self.tally, 8)?;
-        Ok([t[0], t[1]])
+    /// The last step's `tally`, indexed by `layout::TALLY_*`.
+    pub fn tally(&self, ctx: &Context) -> Result<Vec<u32>> {
+        buffers::read_back::<u32>(&ctx.device, &ctx.queue, &self.tally, self.tally.size())
     }
 
     /// Whether any step since the last `clear_overflow` ran out of fragment room.

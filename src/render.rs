@@ -911,7 +911,7 @@ impl<'a> Renderer<'a> {
 
     /// The last step's fragments past their lines' buckets (spill nodes; `LINE_BUCKET`).
     pub fn spilled(&self) -> Result<u32> {
-        Ok(self.iteration().tally(self.ctx)?[0])
+        Ok(self.iteration().tally(self.ctx)?[TALLY_SPILLED as usize])
     }
 
     /// Whether a step since the last `clear_overflow` ran out of fragment room.

@@ -398,8 +398,7 @@ fn test08_the_coarse_burn_in_keeps_the_expected_state() {
             / area;
         means.push(k_mean);
     }
-    let mean = means.iter().sum::<f64>() / means.len() as f64;
-    let spread = (means.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (means.len() - 1) as f64).sqrt();
+    let (mean, spread) = common::mean_and_spread(&means);
     let exact = o(steps - 1) / 2.0;
     eprintln!(
         "after {steps} coarse steps: mean K {mean:.4} (seeds {means:?}, spread {spread:.4}), exact {exact:.4}; converged {:.4}",

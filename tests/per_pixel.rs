@@ -273,8 +273,7 @@ fn test04_no_start_up_bias() {
     let late = run(2000, 1);
     let ratios: Vec<f64> = (1..=12).map(|seed| run(100, seed) / late).collect();
     let n = ratios.len() as f64;
-    let mean = ratios.iter().sum::<f64>() / n;
-    let spread = (ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let (mean, spread) = common::mean_and_spread(&ratios);
     // Three standard errors of the difference: the seeds' mean, and the 2000-step image,
     // whose own error is that of one seed over 20 times the steps.
     let tolerance = 3.0 * spread * (1.0 / n + 1.0 / 20.0).sqrt();
@@ -573,8 +572,7 @@ material = "gloss"
         })
         .collect();
     let n = ratios.len() as f64;
-    let mean = ratios.iter().sum::<f64>() / n;
-    let spread = (ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let (mean, spread) = common::mean_and_spread(&ratios);
     let tolerance = 3.0 * spread / n.sqrt();
     eprintln!("mean of the seeds {mean:.4}, spread {spread:.4}, tolerance {tolerance:.4}");
     assert!(tolerance < 0.014, "too noisy to tell: tolerance {tolerance:.4}");

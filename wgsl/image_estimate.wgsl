@@ -422,12 +422,12 @@ fn on_line(x: vec3<f32>, s: f32) -> OnLine {
     // the sorted line). A line within its bucket (LINE_BUCKET = 8 places, nearly every line)
     // takes four fixed halvings: a CPU adapter runs a data-dependent loop over storage many
     // times slower.
-    var lo = line.begin;
-    var n = line.end - line.begin;
+    let n = line.end - line.begin;
     if (n <= LINE_BUCKET) {
-        lo = lower_half(lo, n, start_depth).x;
-        return OnLine(line.begin, line.end, lo, false);
+        line.lo = lower_half(line.begin, n, start_depth).x;
+        return line;
     }
+    var lo = line.begin;
     var hi = line.end;
     while (lo < hi) {
         let mid = (lo + hi) / 2u;

@@ -218,22 +218,19 @@ pub fn gpu_materials(scene: &Scene) -> Vec<GpuMaterial> {
     out
 }
 
-/// Each GPU material's glossy-lobe albedo table (`scene::brdf::glossy_albedo_table`, for
-/// ks = 1), `GLOSSY_ALBEDO_SAMPLES` floats a material in the order of `gpu_materials`; zeros
-/// for a material without a glossy lobe.
-pub fn gpu_glossy_albedo(scene: &Scene) -> Vec<f32> {
+/// The glossy-lobe albedo table (`scene::brdf::glossy_albedo_table`, for ks = 1) of each
+/// material of `gpu_materials`, in its order, `GLOSSY_ALBEDO_SAMPLES` floats a material;
+/// zeros for one without a glossy lobe.
+pub fn gpu_glossy_albedo(materials: &[GpuMaterial]) -> Vec<f32> {
     let n = GLOSSY_ALBEDO_SAMPLES as usize;
-    let mut out: Vec<f32> = Vec::with_capacity((scene.materials.len() + 1) * n);
-    for (m, gpu) in scene.materials.iter().zip(gpu_materials(scene)) {
-        match m.kind {
-            MaterialKind::Phong { shininess, .. } if gpu.kind == MATERIAL_PHONG => {
-                out.extend(crate::scene::brdf::glossy_albedo_table(f64::from(shininess)))
-            }
-            _ => out.extend(std::iter::repeat_n(0.0, n)),
+    let mut out: Vec<f32> = Vec::with_capacity(materials.len() * n);
+    for m in materials {
+        if m.kind == MATERIAL_PHONG {
+            out.extend(crate::scene::brdf::glossy_albedo_table(f64::from(m.specular[3])));
+        } else {
+            out.extend(std::iter::repeat_n(0.0, n));
         }
     }
-    // The black material's.
-    out.extend(std::iter::repeat_n(0.0, n));
     out
 }
 
@@ -360,6 +357,7 @@ impl SceneBuffers {
         page_bytes: u64,
     ) -> SceneBuffers {
         let gpu = gpu_patches(scene, patches, first_shot);
+        let materials = gpu_materials(scene);
         let samples = gpu_samples(patches);
         let (centre, radius) = bounding_sphere(patches);
         let none = wgpu::BufferUsages::empty();
@@ -367,11 +365,11 @@ impl SceneBuffers {
             patch_count: gpu.len() as u32,
             page_bytes,
             patches: Paged::init(device, "firstshot.scene.patches", PATCH_TABLE, &gpu, page_bytes, none),
-            materials: buffers::storage_init(device, "firstshot.scene.materials", &gpu_materials(scene), none),
+            materials: buffers::storage_init(device, "firstshot.scene.materials", &materials, none),
             glossy_albedo: buffers::storage_init(
                 device,
                 "firstshot.scene.glossy_albedo",
-                &gpu_glossy_albedo(scene),
+                &gpu_glossy_albedo(&materials),
                 none,
             ),
             samples: buffers::storage_init(device, "firstshot.scene.light_samples", &samples, none),

@@ -10,6 +10,15 @@ pub mod scratch;
 pub mod shards;
 
 use firstshot::gpu::{AdapterChoice, Context};
+
+/// The mean of per-seed results and their sample standard deviation (n - 1): the spread
+/// from which the seed-averaged tests take their tolerances.
+pub fn mean_and_spread(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let spread = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    (mean, spread)
+}
 use std::path::PathBuf;
 
 /// The one way tests get a GPU. With `FIRSTSHOT_REQUIRE_GPU=1` (CI) a missing adapter is a
