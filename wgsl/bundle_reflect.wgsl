@@ -1,6 +1,7 @@
 // Bundle reflection (docs/ALGORITHM.md 2.2): the radiance every patch sends into this step's bundle,
-//   O_j = Le_j + Lfs_j(c_j, s_j d) + 2 kd_j K_j + 2 pi J_j f_glossy_j(win_j, c_j, s_j d)
-// (2 kd K = 2 pi K f_diffuse: K_j is J_j with its control variate, bundle_finalize), with Le
+//   O_j = Le_j + Lfs_j(c_j, s_j d) + 2 kd_j K_j + (1 / h) sum_i 2 pi J_j,i f_glossy_j(win_j,i, c_j, s_j d)
+// (2 kd K = 2 pi K f_diffuse: K_j is J_j with its control variate, bundle_finalize; the
+// glossy sum over the h <= GLOSSY_HISTORY + 1 latest J_j with their directions), with Le
 // left out for first-shot lights (their first reflection replaces them); the same with the
 // mean of K_j over the image steps in place of K_j, which the image gathers
 // (`image_outgoing`, docs/ALGORITHM.md 6); and the largest |O| of the step (for the
@@ -45,10 +46,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let c = patch_centre(p);
     o += first_shot_radiance(j, c, n, m, w_out);
     // What the image gathers from j: its diffuse reflection of the mean J of the image steps
-    // so far (a direction-free estimate with none of the chain's step-to-step noise), and
-    // the mean of the glossy reflections of the last steps' J (each an independent sample of
-    // win, drawn before this step's d, so their mean is as unbiased as one and spreads a
-    // spike of one step's J over as many gather directions: docs/ALGORITHM.md 6).
+    // so far (a direction-free estimate with none of the chain's step-to-step noise).
     var image_o = o;
     var mean_radiance = vec3<f32>(0.0);
     if (bundle.use_state != 0u) {
@@ -57,32 +55,37 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         mean_radiance = state_at(j).mean_radiance.rgb;
         let diffuse = state_at(j).diffuse.rgb;
         let diffuse_sum = state_at(j).diffuse_sum;
+        // The glossy part, in the transport and the image alike: the mean of the glossy
+        // reflections of the last steps' J, each an independent sample of win drawn before
+        // this step's d, so the mean is as unbiased as one sample (docs/ALGORITHM.md 2.2).
+        // One sample alone multiplies J by up to 2 pi |n . d| f_glossy (3.2 at the peak of
+        // Sierpinski's lobe, more on sharper ones) at every glossy bounce: chains of such
+        // gains made a few patches hundreds of times too bright for some steps. The mean
+        // spreads one step's spike over as many steps at a fraction of its weight.
         var glossy = vec3<f32>(0.0);
-        var image_glossy = vec3<f32>(0.0);
         if (m.kind == MATERIAL_PHONG) {
             let incoming = state_at(j).incoming;
             glossy = glossy_reflection(m, n, incoming.rgb, -state_at(j).direction.xyz, w_out);
-            image_glossy = glossy;
             // Unrolled, for GLOSSY_HISTORY entries: a CPU adapter runs a data-dependent loop
             // many times slower.
             let written = u32(incoming.w);
             if (written > 0u) {
-                image_glossy += earlier_glossy(m, n, state_at(j).earlier[0], w_out);
+                glossy += earlier_glossy(m, n, state_at(j).earlier[0], w_out);
             }
             if (written > 1u) {
-                image_glossy += earlier_glossy(m, n, state_at(j).earlier[1], w_out);
+                glossy += earlier_glossy(m, n, state_at(j).earlier[1], w_out);
             }
             if (written > 2u) {
-                image_glossy += earlier_glossy(m, n, state_at(j).earlier[2], w_out);
+                glossy += earlier_glossy(m, n, state_at(j).earlier[2], w_out);
             }
-            image_glossy /= f32(1u + written);
+            glossy /= f32(1u + written);
         }
         o += 2.0 * m.diffuse.rgb * diffuse + glossy;
         var mean = diffuse;
         if (diffuse_sum.w > 0.0) {
             mean = diffuse_sum.rgb / diffuse_sum.w;
         }
-        image_o += 2.0 * m.diffuse.rgb * mean + image_glossy;
+        image_o += 2.0 * m.diffuse.rgb * mean + glossy;
     }
     outgoing_set(j, vec4<f32>(o, side));
     image_outgoing_set(j, vec4<f32>(image_o, side));
