@@ -561,16 +561,6 @@ fn test09_sun_room_renders_with_its_sunlit_patch() {
     assert!(in_sun > 50 && in_shade > 50, "{in_sun} {in_shade}");
 }
 
-/// max-Phong as SCENE_FORMAT.md writes it (one channel), the test's own reading.
-fn max_phong(kd: f64, ks: f64, shininess: f64, n: DVec3, w_in: DVec3, w_out: DVec3) -> f64 {
-    let (cos_in, cos_out) = (n.dot(w_in), n.dot(w_out));
-    if cos_in <= 0.0 || cos_out <= 0.0 {
-        return 0.0;
-    }
-    let mirror = 2.0 * cos_in * n - w_in;
-    kd / PI + ks * mirror.dot(w_out).max(0.0).powf(shininess) / cos_in.max(cos_out)
-}
-
 #[test]
 fn test10_sunlit_glossy_square_lights_a_receiver_through_the_iteration() {
     // A max-Phong square (two patches) lit by a sun at 75 degrees, and above it, facing it, a
@@ -636,7 +626,7 @@ fn test10_sunlit_glossy_square_lights_a_receiver_through_the_iteration() {
                 let y = DVec3::new(-1.0 + (i as f64 + 0.5) * cell, -1.0 + (j as f64 + 0.5) * cell, 0.0);
                 let r = x - y;
                 let w = r.normalize();
-                let radiance = irradiance * theta.cos() * max_phong(kd, ks, shininess, n_sq, -d, w);
+                let radiance = irradiance * theta.cos() * common::max_phong(kd, ks, shininess, n_sq, -d, w);
                 sum += radiance * n_sq.dot(w) * n_r.dot(-w) / (PI * r.length_squared()) * cell * cell;
             }
         }

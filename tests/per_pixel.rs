@@ -526,8 +526,7 @@ material = "gloss"
             for k in 0..cols {
                 let phi = (k as f64 + 0.5) * dp;
                 let w_in = DVec3::new(sin_t * phi.cos(), cos_t, sin_t * phi.sin());
-                let mirror = 2.0 * cos_t * DVec3::Y - w_in;
-                let lobe = mirror.dot(w_out).max(0.0).powf(shininess) / cos_t.max(mu);
+                let lobe = common::max_phong(0.0, 1.0, shininess, DVec3::Y, w_in, w_out);
                 sum += lobe * cos_t * sin_t * dt * dp;
             }
         }

@@ -10,6 +10,7 @@ pub mod scratch;
 pub mod shards;
 
 use firstshot::gpu::{AdapterChoice, Context};
+use std::path::PathBuf;
 
 /// The mean of per-seed results and their sample standard deviation (n - 1): the spread
 /// from which the seed-averaged tests take their tolerances.
@@ -19,7 +20,17 @@ pub fn mean_and_spread(values: &[f64]) -> (f64, f64) {
     let spread = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
     (mean, spread)
 }
-use std::path::PathBuf;
+
+/// max-Phong as SCENE_FORMAT.md writes it (one channel), the tests' own reading,
+/// written apart from `scene::brdf`.
+pub fn max_phong(kd: f64, ks: f64, shininess: f64, n: DVec3, w_in: DVec3, w_out: DVec3) -> f64 {
+    let (cos_in, cos_out) = (n.dot(w_in), n.dot(w_out));
+    if cos_in <= 0.0 || cos_out <= 0.0 {
+        return 0.0;
+    }
+    let mirror = 2.0 * cos_in * n - w_in;
+    kd / std::f64::consts::PI + ks * mirror.dot(w_out).max(0.0).powf(shininess) / cos_in.max(cos_out)
+}
 
 /// The one way tests get a GPU. With `FIRSTSHOT_REQUIRE_GPU=1` (CI) a missing adapter is a
 /// failure; with `FIRSTSHOT_REQUIRE_BACKEND=vulkan` so is an adapter of another backend.
