@@ -10,7 +10,7 @@ mod stats;
 #[allow(dead_code)]
 mod svg;
 
-use stats::{Reach, equal_error_speedups, parse_image_size, summary, time_to_reach};
+use stats::{Reach, cost_model, equal_error_speedups, parse_image_size, summary, time_to_reach};
 
 /// Float comparisons of closed-form values: only rounding separates them.
 const EPS: f64 = 1e-9;
@@ -123,4 +123,39 @@ fn test07_image_sizes_parse_and_bad_ones_say_how_to_write_them() {
         let e = parse_image_size(bad).unwrap_err();
         assert!(e.contains(bad) && e.contains("WIDTHxHEIGHT"), "{bad}: {e}");
     }
+}
+
+#[test]
+fn test08_cost_model_recovers_start_time_noise_and_floor() {
+    // Runs made exactly by the model: start 0.5 s, 20 ms a sample, noise 0.6, floor 1 %.
+    let made = |start: f64, per: f64, noise: f64, floor: f64, budgets: &[f64]| -> Vec<(f64, f64, f64)> {
+        budgets.iter().map(|&n| (n, start + n * per, (noise * noise / n + floor * floor).sqrt())).collect()
+    };
+    let budgets = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0];
+    let m = cost_model(&made(0.5, 0.02, 0.6, 0.01, &budgets)).expect("a fit");
+    assert!((m.start - 0.5).abs() < 1e-9 && (m.per_sample - 0.02).abs() < 1e-12, "{m:?}");
+    assert!((m.noise - 0.6).abs() < 1e-9 && (m.floor - 0.01).abs() < 1e-9, "{m:?}");
+    // Only the budgets of at least a fiftieth of the largest (20 and up) are fitted.
+    assert_eq!(m.runs, 6);
+    assert!((m.noise_time() - 0.36 * 20.0).abs() < 1e-6);
+    // A transient below a fiftieth of the largest budget does not enter the fit.
+    let mut early = made(0.5, 0.02, 0.6, 0.0, &budgets);
+    early[0].2 = 5.0;
+    let m = cost_model(&early).expect("a fit");
+    assert!((m.noise - 0.6).abs() < 1e-9 && m.floor.abs() < 1e-9, "{m:?}");
+}
+
+#[test]
+fn test09_cost_model_clamps_a_negative_floor_and_refuses_too_few_runs() {
+    // Error falling faster than 1 / sqrt(N) (a transient): the best floor^2 is negative, so
+    // the fit takes no floor and the noise alone.
+    let runs: Vec<(f64, f64, f64)> = [100.0, 200.0, 400.0].iter().map(|&n| (n, n * 0.01, 1.0 / n)).collect();
+    let m = cost_model(&runs).expect("a fit");
+    assert_eq!(m.floor, 0.0);
+    assert!(m.noise > 0.0 && m.noise.is_finite());
+    // Two runs are too few; a time that falls with the budget has no time a sample.
+    assert_eq!(cost_model(&runs[..2]), None);
+    let flat: Vec<(f64, f64, f64)> =
+        [100.0f64, 200.0, 400.0].iter().map(|&n| (n, 3.0 - 0.001 * n, 0.1 / n.sqrt())).collect();
+    assert_eq!(cost_model(&flat), None);
 }

@@ -19,7 +19,7 @@
 //! from two independent halves.
 
 use crate::mitsuba::{Python, SETUP, find_python};
-use crate::stats::{Reach, time_to_reach};
+use crate::stats::{CostModel, Reach, cost_model, time_to_reach};
 use crate::svg::{Plot, Series};
 use crate::{Config, Machine, Slot, print_table, write_json, write_text};
 use firstshot::image::{Image, image_error};
@@ -68,6 +68,10 @@ pub struct SceneResult {
     pub reference_noise: Option<f64>,
     pub runs: Vec<Run>,
     pub levels: Vec<LevelResult>,
+    /// What an error costs each renderer (`stats::cost_model` of its runs): start-up, time
+    /// a sample, noise of one sample, floor. Where the ratios of `levels` come from.
+    pub firstshot_cost: Option<CostModel>,
+    pub mitsuba_cost: Option<CostModel>,
     pub plot: String,
 }
 
@@ -287,6 +291,14 @@ impl Study<'_> {
             c
         };
         let (fs_curve, mi_curve) = (curve("firstshot"), curve("mitsuba"));
+        let cost = |renderer: &str| {
+            let runs: Vec<(f64, f64, f64)> = runs
+                .iter()
+                .filter(|r| r.renderer == renderer)
+                .map(|r| (r.budget as f64, r.seconds, r.relative_rmse))
+                .collect();
+            cost_model(&runs)
+        };
         let levels = LEVELS
             .iter()
             .map(|&level| {
@@ -326,6 +338,8 @@ impl Study<'_> {
             bundle_resolution: self.config.quick.then_some(128),
             reference: reference_name,
             reference_noise,
+            firstshot_cost: cost("firstshot"),
+            mitsuba_cost: cost("mitsuba"),
             runs,
             levels,
             plot: plot_name,
@@ -467,4 +481,27 @@ fn print_results(results: &[SceneResult]) {
         })
         .collect();
     print_table(&["scene", "error", "firstshot", "Mitsuba", "ratio"], &rows);
+    println!(
+        "\nWhat an error costs (fitted to the runs of at least a fiftieth of the largest budget: seconds = start + N t, error^2 = s^2 / N + b^2; s^2 t in ms, the lower the faster):"
+    );
+    let rows: Vec<Vec<String>> = results
+        .iter()
+        .flat_map(|r| {
+            [("firstshot", &r.firstshot_cost), ("Mitsuba", &r.mitsuba_cost)].map(|(who, c)| {
+                let mut row = vec![r.scene.clone(), who.to_string()];
+                row.extend(match c {
+                    Some(c) => vec![
+                        format!("{:.2} s", c.start),
+                        format!("{:.1} ms", c.per_sample * 1e3),
+                        format!("{:.3}", c.noise),
+                        format!("{:.4}", c.floor),
+                        format!("{:.2}", c.noise_time()),
+                    ],
+                    None => vec!["-".into(); 5],
+                });
+                row
+            })
+        })
+        .collect();
+    print_table(&["scene", "renderer", "start", "t a sample", "s", "floor b", "s^2 t"], &rows);
 }

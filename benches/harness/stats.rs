@@ -136,3 +136,74 @@ pub fn parse_image_size(text: &str) -> Result<(u32, u32), String> {
         None => Err(format!("`{text}` is not an image size; write WIDTHxHEIGHT, e.g. 7680x4320")),
     }
 }
+
+/// What an error costs a renderer, fitted to its runs of a series of budgets (steps or
+/// samples per pixel): wall time = `start` + N `per_sample` and error^2 = `noise`^2 / N +
+/// `floor`^2. `noise` is the error one sample would have; `noise`^2 `per_sample` is the time
+/// the noise alone needs to reach an error, up to a constant, so two renderers' values of it
+/// say which gets there first once both are past their start-up and above their floors.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CostModel {
+    /// Seconds before the first sample (process, set-up, and what the fit cannot tell
+    /// apart from them).
+    pub start: f64,
+    /// Seconds a sample.
+    pub per_sample: f64,
+    pub noise: f64,
+    pub floor: f64,
+    /// The runs fitted.
+    pub runs: usize,
+}
+
+impl CostModel {
+    /// noise^2 x milliseconds a sample: the lower, the faster to an error.
+    pub fn noise_time(&self) -> f64 {
+        self.noise * self.noise * self.per_sample * 1e3
+    }
+}
+
+/// Fits `CostModel` to (budget, seconds, error) runs, the runs of the largest budgets only:
+/// those of at least a fiftieth of the largest (below that, start-up and the first samples'
+/// transients dominate). The time by least squares; error^2 against 1 / N by least squares
+/// weighted by 1 / error^4 (each run's relative misfit counts alike), with the floor set to
+/// 0 where the best one would be negative. None with fewer than three such runs, or where
+/// the fit leaves no positive time a sample or noise.
+pub fn cost_model(runs: &[(f64, f64, f64)]) -> Option<CostModel> {
+    let largest = runs.iter().filter(|r| r.2.is_finite() && r.2 > 0.0).map(|r| r.0).fold(0.0, f64::max);
+    let used: Vec<(f64, f64, f64)> = runs
+        .iter()
+        .copied()
+        .filter(|&(n, t, e)| n >= largest / 50.0 && n > 0.0 && t.is_finite() && e.is_finite() && e > 0.0)
+        .collect();
+    if used.len() < 3 {
+        return None;
+    }
+    // Least squares of y = a + b x with weights w: (a, b).
+    let line = |points: &[(f64, f64, f64)]| -> Option<(f64, f64)> {
+        let (mut sw, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(x, y, w) in points {
+            sw += w;
+            sx += w * x;
+            sy += w * y;
+            sxx += w * x * x;
+            sxy += w * x * y;
+        }
+        let det = sw * sxx - sx * sx;
+        (det.abs() > f64::EPSILON * sw * sxx).then(|| ((sy * sxx - sx * sxy) / det, (sw * sxy - sx * sy) / det))
+    };
+    let (start, per_sample) = line(&used.iter().map(|&(n, t, _)| (n, t, 1.0)).collect::<Vec<_>>())?;
+    let squares: Vec<(f64, f64, f64)> = used.iter().map(|&(n, _, e)| (1.0 / n, e * e, e.powi(-4))).collect();
+    let (mut floor2, mut noise2) = line(&squares)?;
+    if floor2 < 0.0 {
+        // No floor: error^2 = noise^2 / N alone.
+        let (sxy, sxx) = squares.iter().fold((0.0, 0.0), |(a, b), &(x, y, w)| (a + w * x * y, b + w * x * x));
+        (floor2, noise2) = (0.0, sxy / sxx);
+    }
+    (per_sample > 0.0 && noise2 > 0.0).then(|| CostModel {
+        start,
+        per_sample,
+        noise: noise2.sqrt(),
+        floor: floor2.sqrt(),
+        runs: used.len(),
+    })
+}
