@@ -255,6 +255,16 @@ fn test03_converter_geometry_is_the_loaders_triangle_for_triangle() {
     }
 }
 
+/// Renders the scene file at `scene` with Mitsuba's llvm variant through the converter
+/// (`tools/mitsuba/render.py`, with `args` besides) into `out`, and reads the image back.
+fn mitsuba_render(python: &Python, scene: &Path, out: &Path, args: &[&str]) -> Image {
+    let mut cmd = python.script("render.py");
+    cmd.arg(scene).arg("--out").arg(out).args(["--variant", "llvm_ad_rgb", "--quiet"]).args(args);
+    let status = cmd.output().expect("python runs");
+    assert!(status.status.success(), "render.py failed: {}", String::from_utf8_lossy(&status.stderr));
+    Image::read_exr(out).unwrap()
+}
+
 /// Renders `scene` with Mitsuba through the converter at `size` x `size` and compares it
 /// with `refs/<stem>.<full|direct>.exr` box-filtered down to that size.
 fn converted_against_reference(
@@ -268,15 +278,12 @@ fn converted_against_reference(
     let which = if direct { "direct" } else { "full" };
     let out = dir.join(format!("{which}.exr"));
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").join(format!("{stem}.toml"));
-    let mut cmd = python.script("render.py");
-    cmd.arg(&scene).arg("--out").arg(&out).args(["--variant", "llvm_ad_rgb", "--quiet"]);
-    cmd.args(["--spp", &spp.to_string(), "--width", &size.to_string(), "--height", &size.to_string()]);
+    let (spp, size_text) = (spp.to_string(), size.to_string());
+    let mut args = vec!["--spp", &spp, "--width", &size_text, "--height", &size_text];
     if direct {
-        cmd.arg("--direct");
+        args.push("--direct");
     }
-    let status = cmd.output().expect("python runs");
-    assert!(status.status.success(), "render.py failed: {}", String::from_utf8_lossy(&status.stderr));
-    let image = Image::read_exr(&out).unwrap();
+    let image = mitsuba_render(python, &scene, &out, &args);
     let mut reference = Image::read_exr(&common::refs_dir().join(format!("{stem}.{which}.exr"))).unwrap();
     while reference.width > size {
         reference = reference.downsample2();
@@ -391,13 +398,7 @@ fn test06_glossy_interreflection_matches_mitsuba() {
     let dir = common::output_dir("mitsuba_glossy_room");
     let path = dir.join("glossy_room.toml");
     std::fs::write(&path, GLOSSY_ROOM).unwrap();
-    let reference_path = dir.join("mitsuba.exr");
-    let mut cmd = python.script("render.py");
-    cmd.arg(&path).arg("--out").arg(&reference_path);
-    cmd.args(["--variant", "llvm_ad_rgb", "--quiet", "--spp", "4096", "--seed", "7"]);
-    let status = cmd.output().expect("python runs");
-    assert!(status.status.success(), "render.py failed: {}", String::from_utf8_lossy(&status.stderr));
-    let reference = Image::read_exr(&reference_path).unwrap();
+    let reference = mitsuba_render(&python, &path, &dir.join("mitsuba.exr"), &["--spp", "4096", "--seed", "7"]);
     let scene = scene::load(&path).unwrap();
     let patches = scene::tessellate(&scene, 0.25).unwrap();
     let seeds = 8;
