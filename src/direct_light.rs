@@ -476,6 +476,20 @@ impl DirectLights {
         self.table.len() as u32
     }
 
+    /// The `override` constants of image_estimate's `direct` entry point for this table: the
+    /// kinds of light it holds (bit `1 << LIGHT_*`) and the face counts of their windows (bit
+    /// `1 << faces`), so that the kernel is compiled without the others' code. An empty table
+    /// keeps the defaults (every kind): nothing is evaluated then.
+    pub fn specialization(&self) -> [(&'static str, f64); 2] {
+        let bit = |n: u32| 1u32.checked_shl(n).unwrap_or(u32::MAX);
+        let kinds = self.table.iter().fold(0u32, |bits, l| bits | bit(l.kind));
+        let faces = self.table.iter().fold(0u32, |bits, l| bits | bit(l.faces));
+        match self.table.is_empty() {
+            true => [("LIGHT_KINDS", u32::MAX as f64), ("WINDOW_FACE_COUNTS", u32::MAX as f64)],
+            false => [("LIGHT_KINDS", kinds as f64), ("WINDOW_FACE_COUNTS", faces as f64)],
+        }
+    }
+
     /// Whether a pass must render windows of its own (the scene has first-shot area lights).
     pub fn has_area_lights(&self) -> bool {
         self.lights.iter().any(|l| matches!(l.source, Source::Area { .. }))

@@ -199,7 +199,9 @@ pub struct ImageError {
 
 /// Compares after a 2 x 2 box downsample of both images, over the pixels whose reference
 /// luminance is at most 10 times the reference's median (directly seen lights, exact
-/// anyway, would swamp the figure).
+/// anyway, would swamp the figure). The median is that of the pixels that are not black:
+/// where most of the reference is black (a dark room lit by a sun patch), the median of
+/// all pixels is 0 and would leave out every lit one.
 pub fn image_error(image: &Image, reference: &Image) -> Result<ImageError> {
     if image.width != reference.width || image.height != reference.height {
         return Err(Error::Usage(format!(
@@ -209,7 +211,7 @@ pub fn image_error(image: &Image, reference: &Image) -> Result<ImageError> {
     }
     let a = image.downsample2();
     let b = reference.downsample2();
-    let mut lum: Vec<f64> = b.pixels.iter().map(|&p| luminance(p)).collect();
+    let mut lum: Vec<f64> = b.pixels.iter().map(|&p| luminance(p)).filter(|&l| l > 0.0).collect();
     let median = if lum.is_empty() {
         0.0
     } else {
@@ -238,4 +240,41 @@ pub fn image_error(image: &Image, reference: &Image) -> Result<ImageError> {
         mean: image.mean(),
         reference_mean: reference.mean(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A reference that is black but for a lit band (0.5) and a directly seen light (100),
+    /// each a whole number of 2 x 2 blocks.
+    fn mostly_black() -> Image {
+        let (width, height) = (16, 16);
+        let pixels = (0..width * height)
+            .map(|i| match (i % width, i / width) {
+                (_, 0..4) => [0.5f32; 3],
+                (0..2, 4..6) => [100.0; 3],
+                _ => [0.0; 3],
+            })
+            .collect();
+        Image::new(width, height, pixels)
+    }
+
+    #[test]
+    fn a_mostly_black_reference_still_counts_its_lit_pixels() {
+        let reference = mostly_black();
+        // 10 % too bright everywhere: relative RMSE 0.1 and ratio 1.1 over the counted
+        // pixels, whatever their number, as long as the light is left out and the lit band
+        // is in (with the median of all pixels, 0, nothing lit was counted: 0 / 0).
+        let brighter = Image::new(
+            reference.width,
+            reference.height,
+            reference.pixels.iter().map(|p| p.map(|v| v * 1.1)).collect(),
+        );
+        let e = image_error(&brighter, &reference).unwrap();
+        assert!((e.relative_rmse - 0.1).abs() < 1e-6, "{e:?}");
+        assert!(e.mean_ratio.iter().all(|r| (r - 1.1).abs() < 1e-6), "{e:?}");
+        // 8 x 8 blocks: the light's one block left out.
+        assert_eq!(e.pixels, 63, "{e:?}");
+    }
 }

@@ -654,3 +654,68 @@ fn test10_sunlit_glossy_square_lights_a_receiver_through_the_iteration() {
     // albedo below 0.75: about 1 %).
     assert!((mean - expected).abs() < 4.0 * standard_error + 0.015 * expected, "measured {mean} against {expected}");
 }
+
+/// The direct-light image of `scene` after `passes` passes, its lights' windows at `side`
+/// texels whatever the lights (so that every render below sees through the same texels).
+fn direct_with_windows(scene: &Scene, passes: u32, side: u32) -> Option<Image> {
+    let ctx = common::gpu()?;
+    let mut options = RenderOptions::from_scene(scene);
+    options.iterations = 0;
+    options.direct_passes = passes;
+    options.shadow_resolution = Some(side);
+    let patches = scene::tessellate(scene, options.patch_size).unwrap();
+    Some(render(&ctx, scene, &patches, &options).unwrap().image)
+}
+
+#[test]
+fn test11_a_sun_a_spot_and_a_point_light_together_light_as_the_sum_of_each_alone() {
+    // The direct pass is compiled for the kinds of light the scene has (image_estimate's
+    // LIGHT_KINDS and WINDOW_FACE_COUNTS): each light alone gets a kernel with its own kind's
+    // code only, the three together one with all three. Light adds up, and each render
+    // sees the same camera samples and window texels, so the sum of the three images must
+    // be the image of the three, but for the order of a float sum per pixel.
+    let (d, _) = sun_direction();
+    let lights = [
+        format!("[[lights]]\ntype = \"directional\"\ndirection = [{}, {}, {}]\nirradiance = [2.0, 1.5, 1.0]\n", d.x, d.y, d.z),
+        "[[lights]]\ntype = \"spot\"\nposition = [0.2, 1.5, -0.1]\ndirection = [0.15, -1.0, 0.1]\nintensity = [3.0, 3.0, 3.0]\ninner_angle = 12.0\nouter_angle = 30.0\n".to_string(),
+        "[[lights]]\ntype = \"point\"\nposition = [-0.6, 1.2, 0.7]\npower = [20.0, 30.0, 40.0]\n".to_string(),
+    ];
+    // The sun's parallel view spans the scene's bounding sphere, which holds the lights'
+    // positions too: a thin mast at the floor's corner, out of the camera's view, makes the
+    // sphere the same with and without the spot and the point light.
+    let base = format!(
+        "{FLOOR_AND_OCCLUDER}\n[[shapes]]\ntype = \"triangle\"\nvertices = [[-1.5, 0.0, -1.5], [-1.5, 1.6, -1.5], [-1.45, 0.0, -1.5]]\nmaterial = \"grey\"\n"
+    );
+    let passes = 4;
+    let mut alone = Vec::new();
+    for (k, light) in lights.iter().enumerate() {
+        let (_scratch, scene) = load(&format!("alone{k}"), &format!("{base}\n{light}"));
+        let Some(image) = direct_with_windows(&scene, passes, 256) else { return };
+        alone.push(image);
+    }
+    let (_scratch, scene) = load("together", &format!("{base}\n{}", lights.concat()));
+    let Some(together) = direct_with_windows(&scene, passes, 256) else { return };
+    let (mut lit, mut worst) = ([0usize; 3], 0f64);
+    for py in 0..together.height {
+        for px in 0..together.width {
+            for c in 0..3 {
+                let parts: Vec<f64> = alone.iter().map(|i| i.at(px, py)[c] as f64).collect();
+                for (k, part) in parts.iter().enumerate() {
+                    if *part > 0.0 {
+                        lit[k] += 1;
+                    }
+                }
+                let sum: f64 = parts.iter().sum();
+                let ours = together.at(px, py)[c] as f64;
+                let error = (ours - sum).abs() / sum.max(1e-3);
+                worst = worst.max(error);
+                assert!(
+                    error <= 1e-5,
+                    "pixel ({px}, {py}) channel {c}: {ours} together, {sum} as the sum of {parts:?}"
+                );
+            }
+        }
+    }
+    eprintln!("pixels lit by each light alone (per channel): {lit:?}; worst relative difference {worst:.2e}");
+    assert!(lit.iter().all(|&n| n > 500), "each light must light part of the floor: {lit:?}");
+}

@@ -51,6 +51,30 @@
 @group(2) @binding(4) var<storage, read> image_outgoing: array<vec4<f32>>;
 @group(2) @binding(5) var<storage, read> image_mean_radiance: array<vec4<f32>>;
 
+// The kinds of light (bit 1 << LIGHT_*) and of window (bit 1 << its face count) that the
+// light table holds: the host builds the `direct` pipeline with them
+// (`DirectLights::specialization`), so that the compiler drops the code of the others. A CPU
+// adapter runs both sides of a branch for every vector of pixels, masked, and a loop at least
+// once: code for a kind the scene lacks cost as much as if every pixel had taken it (the
+// Sierpinski scene's direct pass took a third longer with the sun's and the cube's code in it).
+// The defaults keep every kind.
+override LIGHT_KINDS: u32 = 0xffffffffu;
+override WINDOW_FACE_COUNTS: u32 = 0xffffffffu;
+
+fn has_light(kind: u32) -> bool {
+    return (LIGHT_KINDS & (1u << kind)) != 0u;
+}
+
+fn has_window(faces: u32) -> bool {
+    return (WINDOW_FACE_COUNTS & (1u << faces)) != 0u;
+}
+
+// Whether some window has a face count other than 1 (a sun's view), 5 (a hemicube) or 6 (a
+// cube): only those are searched face by face (`window_face`).
+fn has_other_windows() -> bool {
+    return (WINDOW_FACE_COUNTS & ~((1u << 1u) | (1u << 5u) | (1u << 6u))) != 0u;
+}
+
 // The segment from y to x leaves out this share of its length at each end: its ends lie on
 // the light and on x's own surface.
 const SEGMENT_EPSILON: f32 = 1e-4;
@@ -114,7 +138,7 @@ fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool) -> bool {
 // -t1, t2, -t2; its top face's up is t1 and its right t2) and a cubic tetrahedron (three
 // orthonormal axes).
 fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
-    if (count == 6u) {
+    if (has_window(6u) && count == 6u) {
         let a = abs(w);
         if (a.x >= a.y && a.x >= a.z) {
             return first + select(0u, 1u, w.x < 0.0);
@@ -124,7 +148,7 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
         }
         return first + 4u + select(0u, 1u, w.z < 0.0);
     }
-    if (count == 5u) {
+    if (has_window(5u) && count == 5u) {
         let c = dot(w, faces[first].view.forward.xyz);
         let t1 = dot(w, faces[first].view.up.xyz);
         let t2 = dot(w, faces[first].view.right.xyz);
@@ -135,6 +159,10 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
             return first + select(1u, 2u, t1 < 0.0);
         }
         return first + select(3u, 4u, t2 < 0.0);
+    }
+    if (!has_other_windows()) {
+        // A sun's single view.
+        return first;
     }
     var best = first;
     var largest = dot(w, faces[first].view.forward.xyz);
@@ -168,7 +196,8 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     let right = faces[f].view.right;
     let up = faces[f].view.up;
     var window = vec2<f32>(dot(w, right.xyz), dot(w, up.xyz)) / z - faces[f].view.jitter.zw;
-    if (faces[f].view.size.z == VIEW_ORTHOGRAPHIC) {
+    let sun = has_light(LIGHT_DIRECTIONAL) && faces[f].view.size.z == VIEW_ORTHOGRAPHIC;
+    if (sun) {
         let rel = x - faces[f].view.eye.xyz;
         window = vec2<f32>(dot(rel, right.xyz), dot(rel, up.xyz));
     }
@@ -182,7 +211,7 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     }
     let last = vec2<i32>(i32(side) - 1, i32(tile.z) - 1);
     let origin = vec2<i32>(tile.xy);
-    if (faces[f].view.size.z != VIEW_ORTHOGRAPHIC) {
+    if (!sun) {
         // The 3 x 3 texels around the one that holds the direction, each surface tested
         // exactly against the segment. The 2 x 2 whose centres surround the direction
         // missed a triangle whose corner pokes between them without covering a centre: the
@@ -252,8 +281,9 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
     var sum = vec3<f32>(0.0);
     for (var i = 0u; i < params.light_count; i++) {
         let kind = lights[i].kind;
+        let sun = has_light(LIGHT_DIRECTIONAL) && kind == LIGHT_DIRECTIONAL;
         var y = lights[i].position.xyz;
-        if (kind == LIGHT_DIRECTIONAL) {
+        if (sun) {
             // The sun's light reaches x from the plane of its parallel view, straight back
             // along its direction of travel d.
             let d = lights[i].normal.xyz;
@@ -262,7 +292,7 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
         let to_light = y - x;
         let r2 = dot(to_light, to_light);
         var w_in = to_light * inverseSqrt(r2);
-        if (kind == LIGHT_DIRECTIONAL) {
+        if (sun) {
             w_in = -lights[i].normal.xyz;
         }
         let cos_x = dot(n, w_in);
@@ -270,14 +300,14 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
             continue;
         }
         var g = cos_x / r2;
-        if (kind == LIGHT_DIRECTIONAL) {
+        if (sun) {
             // Irradiance on a surface facing the light: no distance falloff.
             g = cos_x;
         }
-        if (kind == LIGHT_SPOT) {
+        if (has_light(LIGHT_SPOT) && kind == LIGHT_SPOT) {
             g *= spot_falloff(dot(lights[i].normal.xyz, -w_in), lights[i].cone.x, lights[i].cone.y);
         }
-        if (kind == LIGHT_AREA) {
+        if (has_light(LIGHT_AREA) && kind == LIGHT_AREA) {
             let cos_l = max(0.0, dot(lights[i].normal.xyz, -w_in));
             g *= cos_l;
             if (params.mis != 0u && lights[i].normal.w > 0.0) {

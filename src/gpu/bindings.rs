@@ -354,13 +354,15 @@ impl KernelSpec {
         }
     }
 
-    /// The compute pipeline of entry point `entry`, labelled `firstshot.<stem>.<entry>`.
+    /// The compute pipeline of entry point `entry`, labelled `firstshot.<stem>.<entry>`, with
+    /// the kernel's `override` constants set as `constants` says (the rest at their defaults).
     pub fn compute_pipeline(
         &self,
         device: &wgpu::Device,
         module: &wgpu::ShaderModule,
         layout: &wgpu::PipelineLayout,
         entry: &str,
+        constants: &[(&str, f64)],
     ) -> wgpu::ComputePipeline {
         self.workgroup_size(entry);
         device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -368,7 +370,7 @@ impl KernelSpec {
             layout: Some(layout),
             module,
             entry_point: Some(entry),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
             cache: None,
         })
     }
@@ -430,7 +432,18 @@ pub struct Kernel {
 impl Kernel {
     /// The compute pipeline of entry point `entry`.
     pub fn compute_pipeline(&self, device: &wgpu::Device, entry: &str) -> wgpu::ComputePipeline {
-        self.spec.compute_pipeline(device, &self.module, &self.pipeline_layout, entry)
+        self.spec.compute_pipeline(device, &self.module, &self.pipeline_layout, entry, &[])
+    }
+
+    /// As `compute_pipeline`, specialised: the kernel's `override` constants named in
+    /// `constants` take those values.
+    pub fn specialized_pipeline(
+        &self,
+        device: &wgpu::Device,
+        entry: &str,
+        constants: &[(&str, f64)],
+    ) -> wgpu::ComputePipeline {
+        self.spec.compute_pipeline(device, &self.module, &self.pipeline_layout, entry, constants)
     }
 
     /// Bind group `group`, `resources` named as the spec's bindings, in order.

@@ -117,7 +117,8 @@ impl ImageEstimate {
         band_rows: u32,
     ) -> Self {
         let built = SPEC.build_paged(device, scene.paging());
-        let direct_pipeline = built.compute_pipeline(device, "direct");
+        // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
+        let direct_pipeline = built.specialized_pipeline(device, "direct", &direct.specialization());
         let gather_pipeline = built.compute_pipeline(device, "gather");
         let edges_pipeline = built.compute_pipeline(device, "gather_edges");
         let band_rows = band_rows.max(1);
