@@ -199,9 +199,9 @@ pub struct ImageError {
 
 /// Compares after a 2 x 2 box downsample of both images, over the pixels whose reference
 /// luminance is at most 10 times the reference's median (directly seen lights, exact
-/// anyway, would swamp the figure). The median is that of the pixels that are not black:
-/// where most of the reference is black (a dark room lit by a sun patch), the median of
-/// all pixels is 0 and would leave out every lit one.
+/// anyway, would swamp the figure). Where at least half the reference is black (a dark room
+/// lit by a patch of sun), that median is 0 and would leave out every lit pixel: the median
+/// of the pixels that are not black is taken instead.
 pub fn image_error(image: &Image, reference: &Image) -> Result<ImageError> {
     if image.width != reference.width || image.height != reference.height {
         return Err(Error::Usage(format!(
@@ -211,13 +211,18 @@ pub fn image_error(image: &Image, reference: &Image) -> Result<ImageError> {
     }
     let a = image.downsample2();
     let b = reference.downsample2();
-    let mut lum: Vec<f64> = b.pixels.iter().map(|&p| luminance(p)).filter(|&l| l > 0.0).collect();
-    let median = if lum.is_empty() {
-        0.0
-    } else {
-        let k = lum.len() / 2;
-        *lum.select_nth_unstable_by(k, |x, y| x.total_cmp(y)).1
+    let median_of = |mut values: Vec<f64>| {
+        if values.is_empty() {
+            return 0.0;
+        }
+        let k = values.len() / 2;
+        *values.select_nth_unstable_by(k, |x, y| x.total_cmp(y)).1
     };
+    let lum: Vec<f64> = b.pixels.iter().map(|&p| luminance(p)).collect();
+    let mut median = median_of(lum.clone());
+    if median <= 0.0 {
+        median = median_of(lum.into_iter().filter(|&l| l > 0.0).collect());
+    }
     let (mut err2, mut ref2, mut count) = (0.0f64, 0.0f64, 0usize);
     let (mut sum_a, mut sum_b) = ([0.0f64; 3], [0.0f64; 3]);
     for (pa, pb) in a.pixels.iter().zip(&b.pixels) {
@@ -276,5 +281,24 @@ mod tests {
         assert!(e.mean_ratio.iter().all(|r| (r - 1.1).abs() < 1e-6), "{e:?}");
         // 8 x 8 blocks: the light's one block left out.
         assert_eq!(e.pixels, 63, "{e:?}");
+    }
+
+    #[test]
+    fn a_reference_less_than_half_black_keeps_the_median_of_all_pixels() {
+        // 64 blocks of 2 x 2: 30 black, 10 at 0.1, 20 at 0.2, 3 at 1.5 and a light at 100.
+        // The median of all is 0.1, so the 1.5 blocks (over 10 times it) are left out with
+        // the light; the median of the lit blocks alone (0.2) would have kept them.
+        let block = |b: u32| match b {
+            0..30 => 0.0f32,
+            30..40 => 0.1,
+            40..60 => 0.2,
+            60..63 => 1.5,
+            _ => 100.0,
+        };
+        let pixels = (0..256u32).map(|i| [block((i / 16 / 2) * 8 + (i % 16) / 2); 3]).collect();
+        let reference = Image::new(16, 16, pixels);
+        let e = image_error(&reference, &reference).unwrap();
+        assert_eq!(e.pixels, 60, "{e:?}");
+        assert_eq!(e.relative_rmse, 0.0, "{e:?}");
     }
 }
