@@ -18,11 +18,10 @@
 // (`image_outgoing` of bundle_reflect) if its front faces x, black if its back does; the
 // environment if there is none.
 //
-// The image sum has two halves, each a running sum (rgb) and count (w) per pixel: D (entry
-// point `direct`, on the passes that draw new light points) and Le + G (entry point
+// The image sum has two halves, each a running sum (rgb) and count (w) per pixel: Le + D
+// (entry point `direct`, on the passes that draw new light points) and G (entry point
 // `gather`, every step); the image is the sum of their means (the direct light converges
-// in far fewer passes than the indirect, so it is not paid for every step; Le, one load a
-// pixel, is). A direct-light image, which does not gather, has Le + D in the first half.
+// in far fewer passes than the indirect, so it is not paid for every step).
 //
 // Each half is a buffer of its own, and each is cut into bands of whole rows, each band a
 // buffer that one binding can hold: the host dispatches every band with its own group 0,
@@ -592,26 +591,8 @@ fn seen(pixel: vec2<u32>) -> Seen {
     return out;
 }
 
-// What a pixel sees itself: the emission Le of its surface, the environment where there is
-// none, black on a back side.
-fn seen_radiance(at: Seen) -> vec3<f32> {
-    if (at.kind == SEEN_SURFACE) {
-        return patches_at(at.j).emission.rgb;
-    }
-    if (at.kind == SEEN_BACK) {
-        return vec3<f32>(0.0);
-    }
-    return params.environment.rgb;
-}
-
-// D, the direct light of every first-shot light, added to the first half of the image sum;
-// with it what the pixel sees itself (Le, the environment) when the image does not gather
-// (params.seen_in_gather = 0: a direct-light image). When it gathers, `gather` adds that on
-// every step instead: a pixel on the edge of a light seen directly (radiance 14 against 0.06
-// on the Cornell box) takes the light's share of the pixel from its camera samples, and D's
-// half gets only one sample in 8 steps: on the Cornell box the 64 pixels around the light
-// held 20 % of the squared error of a 1000-step image (7 % at 200 steps), against 10 % for
-// Mitsuba 3's.
+// Le + D: emission and the direct light of every first-shot light, or the environment, added
+// to the first half of the image sum.
 @compute @workgroup_size(8, 8)
 fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
@@ -622,13 +603,13 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let at = seen(xy);
-    var radiance = vec3<f32>(0.0);
-    if (params.seen_in_gather == 0u) {
-        radiance = seen_radiance(at);
+    var radiance = params.environment.rgb;
+    if (at.kind == SEEN_BACK) {
+        radiance = vec3<f32>(0.0);
     }
     if (at.kind == SEEN_SURFACE) {
         let m = materials[patches_at(at.j).material];
-        radiance += direct_light(at.j, at.x, at.n, m, at.w_out);
+        radiance = patches_at(at.j).emission.rgb + direct_light(at.j, at.x, at.n, m, at.w_out);
     }
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }
@@ -706,9 +687,6 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         radiance = gather_radiance(at, received.rgb, toward);
     }
-    if (params.seen_in_gather != 0u) {
-        radiance += seen_radiance(at);
-    }
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }
 
@@ -731,10 +709,6 @@ fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>) {
         var line = line_of(at.x);
         line.lo = atomicLoad(&edges[2u * i + 2u]);
         let incoming = nearest_received(at.j, at.x, toward, s, line);
-        var radiance = gather_radiance(at, incoming, toward);
-        if (params.seen_in_gather != 0u) {
-            radiance += seen_radiance(at);
-        }
-        image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
+        image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_radiance(at, incoming, toward), 1.0);
     }
 }

@@ -266,12 +266,10 @@ impl ImageEstimate {
         (0..2).flat_map(move |half| self.bands.iter().map(move |b| &b.sums[half]))
     }
 
-    /// What the estimate adds where no surface is, how many direct lights it evaluates,
+    /// What the estimate adds where no surface is, how many direct lights it evaluates, and
     /// whether the emitting shapes' direct light is shared between D and G (`mis`,
     /// docs/ALGORITHM.md 6: only where the image gathers and the scene has first-shot emitting
-    /// shapes; a direct-light image must not share it), and whether the image gathers
-    /// (`gathers`: then G's half, every step, holds what each pixel sees itself, Le or the
-    /// environment, and D's half only D; a direct-light image keeps Le with D).
+    /// shapes; a direct-light image must not share it).
     pub fn set_params(
         &self,
         queue: &wgpu::Queue,
@@ -279,7 +277,6 @@ impl ImageEstimate {
         patch_count: u32,
         light_count: u32,
         mis: bool,
-        gathers: bool,
     ) {
         for band in &self.bands {
             let params = GpuEstimateParams {
@@ -288,8 +285,6 @@ impl ImageEstimate {
                 light_count,
                 mis: mis as u32,
                 first_row: band.first_row,
-                seen_in_gather: gathers as u32,
-                _pad: [0; 3],
             };
             queue.write_buffer(&band.params, 0, bytemuck::bytes_of(&params));
         }
