@@ -3,17 +3,18 @@
 //! every patch, the image sum (its two halves) and the step count: step k's random numbers
 //! depend only on (seed, k), so no generator state needs saving.
 //!
-//! File layout (little endian): magic "FSCKPT03" (01: before the state's running means and
-//! the image sum's two halves; 02: before the state's glossy history), fingerprint u64, step u32, state length
+//! File layout (little endian): magic "FSCKPT04" (01: before the state's running means and
+//! the image sum's two halves; 02: before the state's glossy history; 03: before the
+//! emission a pixel sees moved from the image sum's first half to its second), fingerprint u64, step u32, state length
 //! u64, image-sum length u64, the two byte arrays, then an FNV-1a 64 checksum of all that
 //! precedes it.
 
 use crate::{Error, Result};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"FSCKPT03";
+const MAGIC: &[u8; 8] = b"FSCKPT04";
 /// Earlier versions' magics, refused with a word on why.
-const OLDER_MAGICS: [&[u8; 8]; 2] = [b"FSCKPT01", b"FSCKPT02"];
+const OLDER_MAGICS: [&[u8; 8]; 3] = [b"FSCKPT01", b"FSCKPT02", b"FSCKPT03"];
 
 /// The iteration state after `step` steps.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -184,6 +184,10 @@ pub struct GpuEstimateParams {
     pub mis: u32,
     /// The image row where this band of the image sum starts (`image_estimate`'s bands).
     pub first_row: u32,
+    /// 1 when the image gathers: what a pixel sees itself (Le, or the environment) is then
+    /// estimated with G on every step instead of with D; 0 for a direct-light image.
+    pub seen_in_gather: u32,
+    pub _pad: [u32; 3],
 }
 
 /// A light as the per-pixel direct light sees it in one pass (docs/ALGORITHM.md 6). WGSL:

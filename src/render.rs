@@ -699,7 +699,7 @@ impl<'a> Renderer<'a> {
                     .image_band_rows
                     .unwrap_or_else(|| crate::stages::image_estimate::band_rows(&device.limits(), camera.width));
                 let estimate = ImageEstimate::new(device, &buffers, &item_buffer, &direct, gather, band_rows);
-                estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis);
+                estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);
                 ViewImage { name, camera, item_buffer, estimate }
             })
             .collect();
@@ -1073,13 +1073,15 @@ impl<'a> Renderer<'a> {
             let pick = ((shuffle.uniform() * (i + 1) as f64) as usize).min(i);
             order.swap(i, pick);
         }
-        // No gather adds its share of the emitting shapes' light: D takes all of it.
+        // No gather adds its share of the emitting shapes' light, nor what the pixels see
+        // themselves: D's half takes all of it.
         for view in &self.views {
             view.estimate.set_params(
                 queue,
                 self.scene.environment,
                 self.buffers.patch_count,
                 self.direct.count(),
+                false,
                 false,
             );
         }

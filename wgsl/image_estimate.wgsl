@@ -18,10 +18,12 @@
 // (`image_outgoing` of bundle_reflect) if its front faces x, black if its back does; the
 // environment if there is none.
 //
-// The image sum has two halves, each a running sum (rgb) and count (w) per pixel: Le + D
-// (entry point `direct`, on the passes that draw new light points) and G (entry point
-// `gather`, every step); the image is the sum of their means (the direct light converges
-// in far fewer passes than the indirect, so it is not paid for every step).
+// The image sum has two halves, each a running sum (rgb) and count (w) per pixel: D (entry
+// point `direct`, on the passes that draw new light points, with the environment) and
+// Le + G (entry point `gather`, every step); the image is the sum of their means (the
+// direct light converges in far fewer passes than the indirect, so it is not paid for every
+// step; Le, one load a pixel, is). A direct-light image, which does not gather, has Le in
+// the first half (params.seen_in_gather = 0).
 //
 // Each half is a buffer of its own, and each is cut into bands of whole rows, each band a
 // buffer that one binding can hold: the host dispatches every band with its own group 0,
@@ -60,6 +62,14 @@
 // The defaults keep every kind.
 override LIGHT_KINDS: u32 = 0xffffffffu;
 override WINDOW_FACE_COUNTS: u32 = 0xffffffffu;
+// True in the gather's pipeline (it runs only where the image gathers): `gather` adds the
+// emission Le a pixel sees on every step, and `direct` leaves it out (params.seen_in_gather).
+// At the outline of a light seen directly Le is most of the pixel, and only the camera
+// samples find its share: with D, on one step in 8, the Cornell box's 64 pixels around its
+// light held 20 % of a 1000-step image's squared error. A pipeline constant, not the
+// parameter: on lavapipe the gather reading the parameter (and the environment) ran up to
+// twice as long.
+override SEEN_IN_GATHER: bool = false;
 
 fn has_light(kind: u32) -> bool {
     return (LIGHT_KINDS & (1u << kind)) != 0u;
@@ -591,8 +601,9 @@ fn seen(pixel: vec2<u32>) -> Seen {
     return out;
 }
 
-// Le + D: emission and the direct light of every first-shot light, or the environment, added
-// to the first half of the image sum.
+// D: the direct light of every first-shot light, or the environment, added to the first half
+// of the image sum; with the emission Le when the image does not gather
+// (params.seen_in_gather = 0), else `gather` adds Le on every step.
 @compute @workgroup_size(8, 8)
 fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
@@ -609,7 +620,10 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     if (at.kind == SEEN_SURFACE) {
         let m = materials[patches_at(at.j).material];
-        radiance = patches_at(at.j).emission.rgb + direct_light(at.j, at.x, at.n, m, at.w_out);
+        radiance = direct_light(at.j, at.x, at.n, m, at.w_out);
+        if (params.seen_in_gather == 0u) {
+            radiance += patches_at(at.j).emission.rgb;
+        }
     }
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }
@@ -672,6 +686,9 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let at = seen(xy);
     var radiance = vec3<f32>(0.0);
+    if (SEEN_IN_GATHER && at.kind == SEEN_SURFACE) {
+        radiance = patches_at(at.j).emission.rgb;
+    }
     if (at.kind == SEEN_SURFACE) {
         let d = bundle.direction.xyz;
         let s = bundle_side(at.n, d);
@@ -683,9 +700,12 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
             let listed = atomicAdd(&edges[0], 1u);
             atomicStore(&edges[2u * listed + 1u], pixel);
             atomicStore(&edges[2u * listed + 2u], line.lo);
+            // Le here, with a count of 0; G and the count in gather_edges (Le in its loop
+            // made that pass twice as slow on lavapipe).
+            image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 0.0);
             return;
         }
-        radiance = gather_radiance(at, received.rgb, toward);
+        radiance += gather_radiance(at, received.rgb, toward);
     }
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }

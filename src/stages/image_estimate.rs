@@ -119,7 +119,7 @@ impl ImageEstimate {
         let built = SPEC.build_paged(device, scene.paging());
         // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
         let direct_pipeline = built.specialized_pipeline(device, "direct", &direct.specialization());
-        let gather_pipeline = built.compute_pipeline(device, "gather");
+        let gather_pipeline = built.specialized_pipeline(device, "gather", &[("SEEN_IN_GATHER", 1.0)]);
         let edges_pipeline = built.compute_pipeline(device, "gather_edges");
         let band_rows = band_rows.max(1);
         let bands = (0..camera.height)
@@ -266,10 +266,12 @@ impl ImageEstimate {
         (0..2).flat_map(move |half| self.bands.iter().map(move |b| &b.sums[half]))
     }
 
-    /// What the estimate adds where no surface is, how many direct lights it evaluates, and
+    /// What the estimate adds where no surface is, how many direct lights it evaluates,
     /// whether the emitting shapes' direct light is shared between D and G (`mis`,
     /// docs/ALGORITHM.md 6: only where the image gathers and the scene has first-shot emitting
-    /// shapes; a direct-light image must not share it).
+    /// shapes; a direct-light image must not share it), and whether the image gathers
+    /// (`gathers`: then G's half, every step, holds what each pixel sees itself, Le or the
+    /// environment, and D's half only D; a direct-light image keeps Le with D).
     pub fn set_params(
         &self,
         queue: &wgpu::Queue,
@@ -277,6 +279,7 @@ impl ImageEstimate {
         patch_count: u32,
         light_count: u32,
         mis: bool,
+        gathers: bool,
     ) {
         for band in &self.bands {
             let params = GpuEstimateParams {
@@ -285,6 +288,8 @@ impl ImageEstimate {
                 light_count,
                 mis: mis as u32,
                 first_row: band.first_row,
+                seen_in_gather: gathers as u32,
+                _pad: [0; 3],
             };
             queue.write_buffer(&band.params, 0, bytemuck::bytes_of(&params));
         }

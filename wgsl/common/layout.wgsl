@@ -82,6 +82,10 @@ struct EstimateParams {
     light_count: u32,
     mis: u32,            // 1: emitting shapes' direct light shared between D and G
     first_row: u32,      // the image row of this band's first (its image_sum starts there)
+    seen_in_gather: u32, // 1: Le (or the environment) estimated with G, every step
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // A light for the per-pixel direct light of one pass (Rust: GpuDirectLight).
