@@ -184,8 +184,9 @@ pub struct GpuEstimateParams {
     pub mis: u32,
     /// The image row where this band of the image sum starts (`image_estimate`'s bands).
     pub first_row: u32,
-    /// 1 when the image gathers: what a pixel sees itself (Le, or the environment) is then
-    /// estimated with G on every step instead of with D; 0 for a direct-light image.
+    /// 1 when the image gathers: the emission Le a pixel sees is then added by the gather on
+    /// every step, and `direct` leaves it out; 0 for a direct-light image (Le with D). The
+    /// environment stays with D either way.
     pub seen_in_gather: u32,
     pub _pad: [u32; 3],
 }

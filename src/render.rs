@@ -1073,8 +1073,8 @@ impl<'a> Renderer<'a> {
             let pick = ((shuffle.uniform() * (i + 1) as f64) as usize).min(i);
             order.swap(i, pick);
         }
-        // No gather adds its share of the emitting shapes' light, nor what the pixels see
-        // themselves: D's half takes all of it.
+        // No gather adds its share of the emitting shapes' light, nor the emission the pixels
+        // see: D's half takes all of it.
         for view in &self.views {
             view.estimate.set_params(
                 queue,

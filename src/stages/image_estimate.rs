@@ -270,8 +270,8 @@ impl ImageEstimate {
     /// whether the emitting shapes' direct light is shared between D and G (`mis`,
     /// docs/ALGORITHM.md 6: only where the image gathers and the scene has first-shot emitting
     /// shapes; a direct-light image must not share it), and whether the image gathers
-    /// (`gathers`: then G's half, every step, holds what each pixel sees itself, Le or the
-    /// environment, and D's half only D; a direct-light image keeps Le with D).
+    /// (`gathers`: then G's half, every step, holds the emission Le each pixel sees, and D's
+    /// half D and the environment; a direct-light image keeps Le with D).
     pub fn set_params(
         &self,
         queue: &wgpu::Queue,

@@ -82,7 +82,7 @@ struct EstimateParams {
     light_count: u32,
     mis: u32,            // 1: emitting shapes' direct light shared between D and G
     first_row: u32,      // the image row of this band's first (its image_sum starts there)
-    seen_in_gather: u32, // 1: Le (or the environment) estimated with G, every step
+    seen_in_gather: u32, // 1: Le added by the gather, every step, not by `direct`
     _pad0: u32,
     _pad1: u32,
     _pad2: u32,
