@@ -12,12 +12,14 @@ pub fn tools_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/mitsuba")
 }
 
-/// A Python interpreter that imports Mitsuba 3 and can run its llvm variant.
+/// A Python interpreter that imports Mitsuba 3 and can run one of its variants.
 #[derive(Debug, Clone)]
 pub struct Python {
     pub path: PathBuf,
     pub mitsuba_version: String,
-    /// The variants this build of Mitsuba has (`cuda_ad_rgb` needs a CUDA device as well).
+    /// The variants this build of Mitsuba has, less `llvm_ad_rgb` where no libLLVM lets it
+    /// run (a GPU machine may have CUDA and no LLVM; `cuda_ad_rgb` is not probed: it needs a
+    /// CUDA device, which the study finds out when it renders).
     pub variants: Vec<String>,
 }
 
@@ -41,7 +43,13 @@ pub fn find_python() -> Result<Python, String> {
     candidates.push(PathBuf::from("python3"));
     let probe = format!(
         "import sys; sys.path.insert(0, {:?}); import render; render.prepare_environment(); \
-         import mitsuba as mi; mi.set_variant('llvm_ad_rgb'); print(mi.__version__); print(' '.join(mi.variants()))",
+         import mitsuba as mi\n\
+         def runs(v):\n\
+         \x20   try: mi.set_variant(v); return True\n\
+         \x20   except Exception: return False\n\
+         usable = [v for v in mi.variants() if v != 'llvm_ad_rgb' or runs(v)]\n\
+         assert usable, 'no variant of this Mitsuba runs here (llvm_ad_rgb needs libLLVM 19)'\n\
+         print(mi.__version__); print(' '.join(usable))",
         tools_dir().display().to_string()
     );
     let mut tried = Vec::new();

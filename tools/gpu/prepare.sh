@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Prepares, on this (x86-64) machine, what the GPU side of the benchmark harness needs on a
+# machine with an NVIDIA GPU and no package registry (the device machines this project is
+# sometimes lent): tools/gpu/run.sh runs there and reads only what this script leaves in
+# three git-ignored folders of the repository:
+#
+#   .gl/   the Vulkan loader and GL dispatch libraries (Debian .deb files, unpacked there)
+#   .whl/  Mitsuba 3 and Dr.Jit for the machine's Python (3.12), trimmed to the cuda_ad_rgb
+#          and scalar_rgb variants and the plugins tools/mitsuba/convert.py uses, so that the
+#          whole tree stays under the 64 MiB a call may carry
+#   .gpu/  stripped, gzipped release builds of `firstshot` and the harness
+#
+# Usage (repository root):  tools/gpu/prepare.sh
+# Then the study runs in one call of the device tool, carrying .gl, .whl and .gpu:
+#   bash tools/gpu/run.sh            (docs/PERFORMANCE.md, "On a GPU")
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+MITSUBA=3.9.1 DRJIT=1.5.0 PY=3.12
+
+# The plugins the converted scenes load (read off /proc/self/maps after rendering every
+# scene in scenes/), plus the neighbours a converted scene can name.
+PLUGINS="area box diffuse hdrfilm independent merge path perspective ply obj point spot srgb
+  uniform regular constant directional direct rectangle sphere twosided gaussian tent
+  stratified bitmap envmap roughconductor conductor plastic roughplastic blendbsdf serialized"
+
+echo "== .gl: Vulkan loader and GL dispatch (amd64 .deb)"
+mkdir -p .gl /tmp/firstshot-apt-amd64/partial
+o=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/firstshot-apt-amd64)
+apt-get "${o[@]}" update -qq
+(cd .gl && apt-get "${o[@]}" download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2 2>&1 | grep -v unsandboxed || true)
+
+echo "== .whl: Mitsuba $MITSUBA and Dr.Jit $DRJIT for Python $PY, trimmed"
+rm -rf .whl && mkdir -p .whl/download .whl/site
+python3 -m pip download -q --no-deps --only-binary=:all: --python-version $PY --implementation cp \
+  --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 --platform manylinux_2_17_x86_64 \
+  -d .whl/download "mitsuba==$MITSUBA" "drjit==$DRJIT"
+for w in .whl/download/*.whl; do python3 -m zipfile -e "$w" .whl/site; done
+m=.whl/site/mitsuba
+rm -rf "$m/include" "$m/data/srgb.coeff" "$m"/llvm_ad_* "$m"/cuda_ad_mono* "$m"/cuda_ad_spectral* "$m"/scalar_spectral* \
+  "$m"/scalar_mono* .whl/site/drjit/include
+mkdir -p "$m/plugins.keep"
+for p in $PLUGINS; do [ -f "$m/plugins/$p.so" ] && mv "$m/plugins/$p.so" "$m/plugins.keep/"; done
+rm -rf "$m/plugins" && mv "$m/plugins.keep" "$m/plugins"
+(cd .whl/site && tar czf ../site.tar.gz .) && rm -rf .whl/site .whl/download
+
+echo "== .gpu: release builds, stripped"
+cargo build --release --locked -q
+harness=$(cargo bench --locked --bench harness --no-run --message-format=json 2>/dev/null |
+  python3 -c "import sys, json
+for l in sys.stdin:
+    m = json.loads(l)
+    if m.get('reason') == 'compiler-artifact' and m['target']['name'] == 'harness' and m.get('executable'): print(m['executable'])")
+rm -rf .gpu && mkdir -p .gpu
+strip -o .gpu/firstshot target/release/firstshot
+strip -o .gpu/harness "$harness"
+gzip -9 .gpu/firstshot .gpu/harness
+du -sh .gl .whl .gpu
+echo "tracked files: $(git ls-files -z | xargs -0 du -cb | tail -1 | cut -f1) bytes"
