@@ -39,7 +39,7 @@ stage() {
 }
 finish() {
     cp "$work/log.txt" "$OUT/log.txt"
-    sleep 1; tar czf "$OUT/gpu.tar.gz" --warning=no-file-changed -C "$work" .
+    sleep 1; tar czf "$OUT/gpu.tar.gz" --warning=no-file-changed --exclude="*.exr" --exclude="*.png" --exclude="*.part" -C "$work" .
     log "results: $OUT/gpu.tar.gz"
 }
 trap finish EXIT
@@ -132,6 +132,8 @@ export -f views; export fs work
 stage views 90 bash -c views
 
 # 6. Scaling: GPU memory and step time from 22 k to millions of patches, images to 8K.
-stage scaling 120 $harness scaling --adapters $vk --repeats 1 \
-    --patch-sizes 0.35,0.1,0.03,0.015,0.0085 --images 512x512,2048x2048,7680x4320 --out "$work/scaling"
+# FIRSTSHOT_GPU_PATCH_SIZES / _IMAGES / _SCALING_LIMIT take it further (0.003: some 80 M patches).
+stage scaling "${FIRSTSHOT_GPU_SCALING_LIMIT:-120}" $harness scaling --adapters $vk --repeats 1 \
+    --patch-sizes "${FIRSTSHOT_GPU_PATCH_SIZES:-0.35,0.1,0.03,0.015,0.0085}" \
+    --images "${FIRSTSHOT_GPU_IMAGES:-512x512,2048x2048,7680x4320}" --out "$work/scaling"
 log "done"
