@@ -28,9 +28,12 @@ pub const EMITTER_SAMPLE_SHARE: f64 = 64.0;
 /// with `--no-first-shot`, and `Patches::notes` says how many and how much power.
 pub const MAX_EMITTER_SAMPLES: u64 = 4096;
 
-/// The most patches a tessellation may produce (33 million). Each costs about 150 bytes on
-/// the host and 200 on the GPU, so beyond it a scene outgrows the memory of the machines
-/// this runs on before any device limit is met; refusing early beats being killed.
+/// The most patches a tessellation may produce (33 million). The count is checked before the
+/// patches are made, the memory prediction (`--memory-limit`) only after: each patch costs
+/// about 420 bytes on the host and 500 on the GPU (32.7 M patches took 13.6 GB and 16.3 GB
+/// on an H200, docs/PERFORMANCE.md "Scaling on the GPU"), so past this a tessellation could
+/// outgrow the host before the prediction refuses it. The GPU layout allows 4 times more
+/// (`layout::MAX_PATCHES`); larger scenes are split into shards (docs/DISTRIBUTED.md).
 pub const MAX_PATCHES: u64 = 1 << 25;
 
 /// What a patch is part of.
