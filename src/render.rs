@@ -958,7 +958,7 @@ impl<'a> Renderer<'a> {
     pub fn read_state(&self) -> Result<Vec<u8>> {
         let mut out = Vec::with_capacity(self.buffers.state.size() as usize);
         for b in &self.buffers.state.pages {
-            out.extend(crate::gpu::buffers::read_back::<u8>(&self.ctx.device, &self.ctx.queue, b, b.size())?);
+            crate::gpu::buffers::read_back_into(&self.ctx.device, &self.ctx.queue, b, 0, b.size(), &mut out)?;
         }
         Ok(out)
     }
@@ -1120,7 +1120,7 @@ impl<'a> Renderer<'a> {
         let mut image_sum = Vec::new();
         for view in &self.views {
             for sum in view.estimate.sum_buffers() {
-                image_sum.extend(crate::gpu::buffers::read_back::<u8>(device, queue, sum, sum.size())?);
+                crate::gpu::buffers::read_back_into(device, queue, sum, 0, sum.size(), &mut image_sum)?;
             }
         }
         let checkpoint = Checkpoint {

@@ -577,3 +577,30 @@ material = "gloss"
     assert!(tolerance < 0.014, "too noisy to tell: tolerance {tolerance:.4}");
     assert!((mean - 1.0).abs() < tolerance, "the plane's mean is {mean:.4} of its albedo's");
 }
+
+#[test]
+fn test12_buffers_read_back_through_one_staging_buffer_in_order() {
+    // The image sums of a large image are read back band by band through one staging buffer
+    // (`buffers::read_back_via`): each read must append exactly its own buffer's bytes, none
+    // of the previous band's left in the staging buffer, and a staging buffer too small for a
+    // band must be an error, not a short read.
+    let Some(ctx) = common::gpu() else { return };
+    use firstshot::gpu::buffers;
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let long: Vec<u32> = (0..1000).map(|i| i * 7 + 1).collect();
+    let short: Vec<u32> = (0..10).map(|i| 90_000 + i).collect();
+    let usage = wgpu::BufferUsages::COPY_SRC;
+    let a = buffers::storage_init(device, "test.long", &long, usage);
+    let b = buffers::storage_init(device, "test.short", &short, usage);
+    let staging = buffers::staging_buffer(device, 4 * long.len() as u64);
+    let mut out: Vec<u32> = Vec::new();
+    buffers::read_back_via(device, queue, &a, 0, 4 * long.len() as u64, &staging, &mut out).unwrap();
+    buffers::read_back_via(device, queue, &b, 0, 4 * short.len() as u64, &staging, &mut out).unwrap();
+    buffers::read_back_via(device, queue, &a, 4 * 990, 40, &staging, &mut out).unwrap();
+    let expected: Vec<u32> = long.iter().chain(&short).chain(&long[990..]).copied().collect();
+    assert_eq!(out, expected);
+    let small = buffers::staging_buffer(device, 16);
+    let err = buffers::read_back_via(device, queue, &a, 0, 4 * long.len() as u64, &small, &mut out).unwrap_err();
+    assert!(err.to_string().contains("staging buffer of 16 bytes"), "{err}");
+    assert_eq!(out.len(), expected.len(), "a refused read appends nothing");
+}

@@ -253,7 +253,9 @@ impl Study<'_> {
         let size = self.size(&scene);
         let variant = if slot.adapter.device_type == "Cpu" { "llvm_ad_rgb" } else { "cuda_ad_rgb" };
         if !self.python.variants.iter().any(|v| v == variant) {
-            return Err(format!("this Mitsuba has no {variant} variant that runs here (llvm_ad_rgb needs libLLVM 19; cuda_ad_rgb a CUDA build)"));
+            return Err(format!(
+                "this Mitsuba has no {variant} variant that runs here (llvm_ad_rgb needs libLLVM 19; cuda_ad_rgb a CUDA build)"
+            ));
         }
         let (reference, reference_name, reference_noise) = self.reference(path, &name, variant, size)?;
 

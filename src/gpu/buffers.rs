@@ -61,16 +61,54 @@ pub fn read_back_at<T: bytemuck::Pod>(
     offset: u64,
     size: u64,
 ) -> Result<Vec<T>> {
-    let size = size.next_multiple_of(4);
-    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+    let mut out = Vec::new();
+    read_back_into(device, queue, buffer, offset, size, &mut out)?;
+    Ok(out)
+}
+
+/// As `read_back_at`, appending to `out`: straight from the mapped staging memory, with no
+/// copy in between (a large image's sums are gigabytes: each copy of them costs seconds).
+pub fn read_back_into<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    size: u64,
+    out: &mut Vec<T>,
+) -> Result<()> {
+    let staging = staging_buffer(device, size);
+    read_back_via(device, queue, buffer, offset, size, &staging, out)
+}
+
+/// A buffer to read back through, of `size` bytes (`read_back_via`).
+pub fn staging_buffer(device: &wgpu::Device, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("firstshot.readback"),
-        size: size.max(4),
+        size: size.next_multiple_of(4).max(4),
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
-    });
+    })
+}
+
+/// As `read_back_into`, through `staging` (`staging_buffer`, at least `size` bytes): reading
+/// many buffers through one staging buffer allocates the mapped memory once (on a GPU, pinned
+/// host memory, which is slow to allocate).
+pub fn read_back_via<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    size: u64,
+    staging: &wgpu::Buffer,
+    out: &mut Vec<T>,
+) -> Result<()> {
+    let size = size.next_multiple_of(4);
+    if staging.size() < size {
+        return Err(Error::Gpu(format!("read-back: a staging buffer of {} bytes for {size}", staging.size())));
+    }
     let mut encoder =
         device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.readback") });
-    encoder.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
+    encoder.copy_buffer_to_buffer(buffer, offset, staging, 0, size);
     queue.submit([encoder.finish()]);
     let slice = staging.slice(..size);
     let (tx, rx) = std::sync::mpsc::channel();
@@ -80,10 +118,10 @@ pub fn read_back_at<T: bytemuck::Pod>(
     device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| Error::Gpu(format!("read-back: {e}")))?;
     rx.recv().map_err(|e| Error::Gpu(format!("read-back: {e}")))?.map_err(|e| Error::Gpu(format!("read-back: {e}")))?;
     let data = slice.get_mapped_range().map_err(|e| Error::Gpu(format!("read-back: {e}")))?;
-    let out =
-        bytemuck::cast_slice::<u8, T>(&data[..(size as usize / std::mem::size_of::<T>()) * std::mem::size_of::<T>()])
-            .to_vec();
+    out.extend_from_slice(bytemuck::cast_slice::<u8, T>(
+        &data[..(size as usize / std::mem::size_of::<T>()) * std::mem::size_of::<T>()],
+    ));
     drop(data);
     staging.unmap();
-    Ok(out)
+    Ok(())
 }

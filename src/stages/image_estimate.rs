@@ -306,9 +306,10 @@ impl ImageEstimate {
     /// of estimates per pixel, each row by row from the top).
     pub fn read_sum(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<[f32; 4]>> {
         let mut sum = Vec::with_capacity(2 * self.width as usize * self.height as usize);
+        let band_bytes = |band: &Band| self.width as u64 * band.rows as u64 * IMAGE_SUM_BYTES_PER_PIXEL;
+        let staging = buffers::staging_buffer(device, self.bands.iter().map(band_bytes).max().unwrap_or(0));
         for (buffer, band) in self.sum_buffers().zip(self.bands.iter().chain(&self.bands)) {
-            let bytes = self.width as u64 * band.rows as u64 * IMAGE_SUM_BYTES_PER_PIXEL;
-            sum.extend(buffers::read_back::<[f32; 4]>(device, queue, buffer, bytes)?);
+            buffers::read_back_via(device, queue, buffer, 0, band_bytes(band), &staging, &mut sum)?;
         }
         Ok(sum)
     }
