@@ -159,3 +159,15 @@ fn test09_cost_model_clamps_a_negative_floor_and_refuses_too_few_runs() {
         [100.0f64, 200.0, 400.0].iter().map(|&n| (n, 3.0 - 0.001 * n, 0.1 / n.sqrt())).collect();
     assert_eq!(cost_model(&flat), None);
 }
+
+#[test]
+fn test10_the_gpu_scripts_parse() {
+    // tools/gpu/ runs only where a GPU is lent (docs/PERFORMANCE.md, "On a GPU"); CI has
+    // none, so at least a syntax error must not wait for that day. `bash -n` parses without
+    // running.
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    for script in ["tools/gpu/prepare.sh", "tools/gpu/run.sh"] {
+        let out = std::process::Command::new("bash").arg("-n").arg(root.join(script)).output().expect("bash runs");
+        assert!(out.status.success(), "{script}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+}
