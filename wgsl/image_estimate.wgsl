@@ -443,11 +443,7 @@ fn line_at(cell: vec2<i32>) -> OnLine {
 
 // x's line with `lo` at its start (`on_line` searches it).
 fn line_of(x: vec3<f32>) -> OnLine {
-    let cell = cell_of(x);
-    if (any(cell < vec2<f32>(0.0)) || any(cell >= vec2<f32>(f32(bundle.resolution)))) {
-        return OnLine(0u, 0u, 0u, true);
-    }
-    return line_at(vec2<i32>(cell));
+    return line_at(vec2<i32>(floor(cell_of(x))));
 }
 
 // One halving of a lower-bound search for `key` over the n fragments from `base`, applied
@@ -788,7 +784,7 @@ fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         var incoming = received.rgb;
         if (received.w == 0.0) {
-            var line = line_of(at.x);
+            var line = line_at(base);
             line.lo = atomicLoad(&edges[2u * i + 2u]);
             incoming = nearest_received(at.j, at.x, toward, s, line);
         }
