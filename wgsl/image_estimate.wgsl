@@ -546,8 +546,8 @@ fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> vec4<f
 // x (x is on a surface, outside every solid), so a candidate that faces away is never the
 // answer: it only says the line passes through a solid x's ray may miss. Answering black
 // there lost light wherever patches are small against the lines (a closed furnace around a
-// Sierpinski tetrahedron of triangles 1.4 lines wide came out 1.7 % dark, single pixels
-// 14 %; tests/per_pixel.rs test13). Unrolled: a CPU adapter runs a data-dependent loop over
+// Sierpinski tetrahedron of triangles 1.4 lines wide came out 1.1-1.7 % dark, single
+// pixels 11-14 %; tests/per_pixel.rs test13). Unrolled: a CPU adapter runs a data-dependent loop over
 // storage many times slower. Only the pixels `gather` lists in `edges` get here: run among
 // the others, this branch made every vector of 8 pixels that held one such pixel pay for it.
 fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLine) -> vec3<f32> {
