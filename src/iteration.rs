@@ -26,26 +26,21 @@ pub struct BundleScene {
 }
 
 /// The bundle of step `step` (the one place a `GpuBundle` is made): direction uniform on
-/// the sphere, grid rotated uniformly about it and shifted by a uniform sub-pixel offset;
-/// the grid covers the bounding sphere. `image`: the step is image step `index` of an image
-/// that started at step `start`, so its J joins the state's running sum and its direction
-/// is stratified over the image's steps (`rng::progressive_direction`); the burn-in's
-/// directions are stratified over blocks of the run's steps (`rng::stratified_direction`).
-/// Returns the step's generator, advanced past the bundle's numbers, for the rest of the
-/// step's random choices.
+/// the sphere (stratified over blocks of steps, `rng::stratified_direction`), grid rotated
+/// uniformly about it and shifted by a uniform sub-pixel offset;
+/// the grid covers the bounding sphere. `image_step`: the step is past the burn-in, so its J
+/// joins the state's running sum. Returns the step's generator, advanced past the bundle's
+/// numbers, for the rest of the step's random choices.
 pub fn bundle_of_step(
     seed: u64,
     step: u64,
-    image: Option<ImageStep>,
+    image_step: bool,
     scene: &BundleScene,
     resolution: u32,
     capacity: u32,
 ) -> (GpuBundle, StepRng) {
     let mut rng = StepRng::new(seed, step);
-    let d = match image {
-        Some(ImageStep { start, index }) => crate::rng::progressive_direction(seed, start, index),
-        None => crate::rng::stratified_direction(seed, step),
-    };
+    let d = crate::rng::stratified_direction(seed, step);
     let angle = 2.0 * std::f64::consts::PI * rng.uniform();
     let t1 = d.any_orthonormal_vector();
     let t2 = d.cross(t1);
@@ -69,18 +64,10 @@ pub fn bundle_of_step(
         capacity,
         // J is zero before the first step has written it.
         use_state: (step > 0) as u32,
-        image_step: image.is_some() as u32,
+        image_step: image_step as u32,
         _pad: [0; 3],
     };
     (bundle, rng)
-}
-
-/// Where a step lies in its image: image step `index` of an image whose first step was
-/// step `start` of the run (the burn-in's end, or a walkthrough frame's first step).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ImageStep {
-    pub start: u64,
-    pub index: u64,
 }
 
 /// The smallest bundle resolution: a projection keeps a pixel of margin on each side of the
@@ -412,10 +399,10 @@ impl Iteration {
         queue: &wgpu::Queue,
         seed: u64,
         step: u64,
-        image: Option<ImageStep>,
+        image_step: bool,
         scene: &BundleScene,
     ) -> StepRng {
-        let (bundle, rng) = bundle_of_step(seed, step, image, scene, self.resolution, self.capacity);
+        let (bundle, rng) = bundle_of_step(seed, step, image_step, scene, self.resolution, self.capacity);
         queue.write_buffer(&self.bundle, 0, bytemuck::bytes_of(&bundle));
         rng
     }

@@ -774,12 +774,8 @@ impl<'a> Renderer<'a> {
     pub fn write_step(&mut self, k: u32) {
         let queue = &self.ctx.queue;
         let image_step = k >= self.image_start;
-        let image = image_step.then(|| crate::iteration::ImageStep {
-            start: self.image_start as u64,
-            index: (k - self.image_start) as u64,
-        });
         let mut rng =
-            self.iteration_at(k).write_bundle(queue, self.options.seed, k as u64, image, &self.bundle_scene());
+            self.iteration_at(k).write_bundle(queue, self.options.seed, k as u64, image_step, &self.bundle_scene());
         if image_step {
             let i = k - self.image_start;
             let u = [rng.uniform(), rng.uniform()];

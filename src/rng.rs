@@ -60,75 +60,6 @@ pub fn stratified_direction(seed: u64, step: u64) -> glam::DVec3 {
     glam::DVec3::new(r * phi.cos(), r * phi.sin(), z)
 }
 
-/// Points per block of a progressive stream (a power of two).
-pub const PROGRESSIVE_BLOCK: u64 = 256;
-/// Independent progressive streams the image's steps alternate between.
-pub const PROGRESSIVE_STREAMS: u64 = 2;
-/// Generator streams of the progressive blocks, apart from the steps', the direction blocks'
-/// and the camera samples' blocks.
-const PROGRESSIVE_STREAM: u64 = u64::MAX / 4 * 3;
-
-/// The bundle direction of image step `index` of an image whose first step is step `start`
-/// of the run: uniform on the sphere, like `stratified_direction`, but stratified for any
-/// number of image steps, not only for whole blocks of the run's steps (of which the image's
-/// first 20 or 50 steps got a random part, barely better than independent directions).
-///
-/// The image's steps alternate between `PROGRESSIVE_STREAMS` independent streams, so that
-/// consecutive steps, which the iteration's two-bounce estimates pair, are independent: one
-/// stream alone made them anti-correlated and biased the state (the Cornell box's image 3 %
-/// dark after 20 steps, docs/PERFORMANCE.md "Where the image's error lies"). A stream's
-/// blocks are a 2D Sobol' (0, 2)-sequence (van der Corput and its Pascal-matrix partner)
-/// with a random digital shift and a uniform offset inside each point's finest cell, so
-/// each point is uniform on the unit square and the stream's first 2^k points form a
-/// (0, k, 2)-net (one point in every elementary cell of area 2^-k); mapped to the
-/// hemisphere of line directions (d and -d make the same lines) by z = u1, phi = 2 pi u2
-/// (area-preserving), with a random sign. A stream's point 0 comes first, then each
-/// doubling [2^k, 2^(k+1)) in the block's random order. The block's numbers depend on
-/// (seed, `start`, stream, block), so that the frames of a walkthrough, each an image of
-/// its own, do not repeat their directions.
-pub fn progressive_direction(seed: u64, start: u64, index: u64) -> glam::DVec3 {
-    let (stream, element) = (index % PROGRESSIVE_STREAMS, index / PROGRESSIVE_STREAMS);
-    let (block, i) = (element / PROGRESSIVE_BLOCK, element % PROGRESSIVE_BLOCK);
-    let key = splitmix64(splitmix64(start ^ (stream << 48)) ^ block);
-    let mut rng = StepRng::new(seed, PROGRESSIVE_STREAM - key);
-    let bits = PROGRESSIVE_BLOCK.trailing_zeros();
-    let shift = [rng.0.next_u32() >> (32 - bits), rng.0.next_u32() >> (32 - bits)];
-    // The Sobol' index of point i: 0, then each doubling's indices in its own random order
-    // (every doubling's permutation is drawn, so that it depends on the block alone).
-    let mut sobol = 0;
-    for k in 0..bits {
-        let len = 1u64 << k;
-        let pick = shuffled(&mut rng, len, i.wrapping_sub(len) % len);
-        if i >= len && i < 2 * len {
-            sobol = len + pick;
-        }
-    }
-    let mut jitter = StepRng::new(seed, PROGRESSIVE_STREAM - splitmix64(key ^ splitmix64(i)) - 1);
-    let cell = (1u64 << bits) as f64;
-    let vdc = ((sobol as u32).reverse_bits() >> (32 - bits)) ^ shift[0];
-    let pascal = (sobol_pascal(sobol as u32) >> (32 - bits)) ^ shift[1];
-    let (u1, u2) = ((vdc as f64 + jitter.uniform()) / cell, (pascal as f64 + jitter.uniform()) / cell);
-    let sign = if jitter.uniform() < 0.5 { -1.0 } else { 1.0 };
-    let z = u1;
-    let phi = 2.0 * std::f64::consts::PI * u2;
-    let r = (1.0 - z * z).max(0.0).sqrt();
-    sign * glam::DVec3::new(r * phi.cos(), r * phi.sin(), z)
-}
-
-/// The second dimension of the Sobol' sequence (generator matrix the Pascal matrix mod 2;
-/// Kollig and Keller 2002), in the high bits.
-fn sobol_pascal(mut i: u32) -> u32 {
-    let (mut r, mut v) = (0u32, 1u32 << 31);
-    while i != 0 {
-        if i & 1 != 0 {
-            r ^= v;
-        }
-        i >>= 1;
-        v ^= v >> 1;
-    }
-    r
-}
-
 /// Element `index` of a random permutation of 0..len drawn from `rng` (Fisher-Yates, drawn
 /// in full so that it depends on the generator alone, not on `index`).
 fn shuffled(rng: &mut StepRng, len: u64, index: u64) -> u64 {
@@ -188,60 +119,6 @@ mod tests {
         }
         // Another seed, other directions.
         assert_ne!(stratified_direction(5, 3), stratified_direction(6, 3));
-    }
-
-    #[test]
-    fn progressive_directions_are_uniform_and_every_doubling_is_a_net() {
-        // Uniform on the sphere: mean 0, E[z^2] = 1/3, over many blocks (as above).
-        let n = 128 * PROGRESSIVE_BLOCK * PROGRESSIVE_STREAMS;
-        let d: Vec<glam::DVec3> = (0..n).map(|i| progressive_direction(5, 41, i)).collect();
-        let mean = d.iter().sum::<glam::DVec3>() / n as f64;
-        let z2 = d.iter().map(|v| v.z * v.z).sum::<f64>() / n as f64;
-        assert!(mean.length() < 0.01 && (z2 - 1.0 / 3.0).abs() < 0.01, "mean {mean}, E[z^2] {z2}");
-        // Each stream's first 2^k points of a block, as points (|z|, phi / 2 pi) of the unit
-        // square, hold one point in every elementary cell of area 2^-k (every split of k
-        // into a halvings of u1 and k - a of u2): a (0, k, 2)-net, in every block.
-        for (stream, block) in [(0, 0), (1, 0), (0, 1), (1, 2)] {
-            let points: Vec<[f64; 2]> = (0..PROGRESSIVE_BLOCK)
-                .map(|i| {
-                    let index = (block * PROGRESSIVE_BLOCK + i) * PROGRESSIVE_STREAMS + stream;
-                    let v = progressive_direction(9, 100, index);
-                    let v = if v.z < 0.0 { -v } else { v };
-                    [v.z, v.y.atan2(v.x).rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU]
-                })
-                .collect();
-            for k in 0..=PROGRESSIVE_BLOCK.trailing_zeros() {
-                let prefix = &points[..1 << k];
-                for a in 0..=k {
-                    let mut cells = vec![0; 1 << k];
-                    for p in prefix {
-                        let (x, y) = ((p[0] * (1u64 << a) as f64) as usize, (p[1] * (1u64 << (k - a)) as f64) as usize);
-                        cells[(x << (k - a)) + y.min((1 << (k - a)) - 1)] += 1;
-                    }
-                    let first = 1 << k;
-                    assert!(
-                        cells.iter().all(|&c| c == 1),
-                        "stream {stream} block {block}, first {first}, {a} halvings of z: {cells:?}"
-                    );
-                }
-            }
-        }
-        // Consecutive image steps come from independent streams: over many blocks, steps
-        // 0 and 1, where one stream alone puts its points 0 and 1 in opposite cells, are as
-        // far apart as two random directions (E|d . d'| = 1/2), and so are steps later on.
-        for offset in [0, 2 * 130] {
-            let blocks = 4000;
-            let cos: f64 = (0..blocks)
-                .map(|b| {
-                    let i = b * PROGRESSIVE_BLOCK * PROGRESSIVE_STREAMS + offset;
-                    progressive_direction(3, 7, i).dot(progressive_direction(3, 7, i + 1)).abs()
-                })
-                .sum::<f64>()
-                / blocks as f64;
-            assert!((cos - 0.5).abs() < 0.02, "steps {offset}, {}: E|d . d'| = {cos}, 1/2 if independent", offset + 1);
-        }
-        // Another start (another frame of a walkthrough), other directions.
-        assert_ne!(progressive_direction(5, 41, 3), progressive_direction(5, 42, 3));
     }
 
     #[test]
