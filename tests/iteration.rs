@@ -206,10 +206,16 @@ fn test03_same_seed_same_bits_and_seeds_agree_within_noise() {
     let bits = |i: &firstshot::image::Image| i.pixels.iter().flat_map(|p| p.map(f32::to_bits)).collect::<Vec<u32>>();
     assert_eq!(bits(&a), bits(&b), "the same seed must give the same image, bit for bit");
     assert_ne!(bits(&a), bits(&c), "another seed must give another image");
-    // Both estimate L = 2.5 everywhere: their means agree within the per-pixel noise.
-    let (ma, mc) = (a.mean()[0], c.mean()[0]);
-    let spread = a.pixels.iter().map(|p| (p[0] as f64 - ma).powi(2)).sum::<f64>() / a.pixels.len() as f64;
-    assert!((ma - mc).abs() < 4.0 * spread.sqrt() + 1e-6, "means {ma} and {mc}, pixel spread {}", spread.sqrt());
+    // Every seed estimates L = 2.5 everywhere. An image's mean strays from seed to seed more
+    // than its pixels stray from that mean (every pixel shares each step's direction: over
+    // seeds 1-12 the means spread by 0.021, an image's pixels by 0.012), so the seeds are
+    // held to the exact value through their own spread: the mean of eight seeds within four
+    // of its standard errors.
+    let means: Vec<f64> = (7..15).map(|seed| if seed == 7 { a.mean()[0] } else { run(seed).mean()[0] }).collect();
+    let (mean, spread) = common::mean_and_spread(&means);
+    let standard_error = spread / (means.len() as f64).sqrt();
+    assert!(standard_error < 0.02, "too noisy to judge: {means:?}");
+    assert!((mean - 2.5).abs() < 4.0 * standard_error, "seeds' mean {mean:.4} against 2.5: {means:?}");
 }
 
 #[test]
