@@ -48,7 +48,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let old = state_at(j);
     let cos_d = abs(dot(patches_at(j).normal.xyz, bundle.direction.xyz));
     let diffuse = incoming - (cos_d - 0.5) * old.mean_radiance.rgb;
-    let mean_radiance = mix(old.mean_radiance.rgb, 2.0 * diffuse, MEAN_RADIANCE_WEIGHT);
+    // A patch smaller than a line's pixel (dP / A_j > 1) is crossed by no line or by one
+    // weighing dP / A_j times its share: its J spikes. Its weight shrinks by A_j / dP, so
+    // that a spike moves Lbar_j by a bounded amount (the weight times 2 dP / A_j times the
+    // radiance: a quarter of the radiance) and Lbar_j averages over about as many crossings
+    // as a large patch's. Lbar_j is only the control variates' coefficient, so any weight
+    // keeps them unbiased; a spiked Lbar_j gave the image's first steps pixels of +-50 where
+    // the radiance is 0.2 (a Cornell box sliver at bundle 64).
+    let weight = MEAN_RADIANCE_WEIGHT * min(1.0, 1.0 / factor);
+    let mean_radiance = mix(old.mean_radiance.rgb, 2.0 * diffuse, weight);
     // Past the burn-in, K joins the running sum whose mean the image's senders reflect.
     var sum = old.diffuse_sum;
     if (bundle.image_step != 0u) {
