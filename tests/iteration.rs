@@ -469,3 +469,38 @@ fn test09_lines_past_their_bucket_keep_every_surface_in_order() {
         assert!((mean[c] - 2.0).abs() < 0.02, "mean {mean:?}");
     }
 }
+
+#[test]
+fn test10_patches_smaller_than_a_line_keep_their_mean_radiance_bounded() {
+    // Lbar_j, the running mean of the radiance a patch receives (the control variates'
+    // coefficient), of a patch far smaller than a line's pixel: one line crossing it weighs
+    // dP / A_j times its share, here about 55 times, so one crossing used to throw Lbar_j to
+    // 14 times the radiance (a quarter of that spike, with the weight 1/8), and the image's
+    // first steps then had pixels of +-50 where the radiance was 0.2. Its weight now shrinks
+    // by A_j / dP: a crossing moves Lbar_j by about a quarter of the radiance. In the
+    // furnace (L = 2.5 everywhere) 64 such specks, each crossed by a line about once in 64
+    // steps, must all keep Lbar_j below twice L after 120 steps, while the walls reach L.
+    use firstshot::layout::GpuPatchState;
+    let Some(ctx) = gpu() else { return };
+    let (scene, mut patches) = furnace(0.6, 1.0);
+    let walls = patches.patches.len();
+    // The grid of 64 lines spans the bounding sphere (radius about 1.84): dP about
+    // (3.8 / 64)^2 = 3.5e-3, against a speck's 6.3e-5.
+    let side = 0.0112;
+    for k in 0..64 {
+        let c = DVec3::new(-0.6 + 0.17 * (k % 8) as f64, -0.5 + 0.14 * (k / 8) as f64, 0.1 * (k % 3) as f64);
+        let speck = [c, c + DVec3::new(side, 0.0, 0.0), c + DVec3::new(0.0, side, 0.0)];
+        patches.patches.push(firstshot::scene::Patch { material: Some(0), emission: [1.0; 3], ..patch(speck) });
+    }
+    let mut o = options(&scene, 120, 3);
+    o.burn_in = Some(0);
+    let mut hooks = FinalState::default();
+    firstshot::render::render_with(&ctx, &scene, &patches, &o, None, &mut hooks).unwrap();
+    let state = bytemuck::pod_collect_to_vec::<u8, GpuPatchState>(&hooks.0.unwrap());
+    let exact = 2.5f32;
+    let wall_mean = state[..walls].iter().map(|s| s.mean_radiance[0]).sum::<f32>() / walls as f32;
+    assert!((wall_mean / exact - 1.0).abs() < 0.1, "the walls' Lbar {wall_mean} against {exact}");
+    let specks: Vec<f32> = state[walls..].iter().map(|s| s.mean_radiance[0]).collect();
+    let largest = specks.iter().cloned().fold(0.0f32, f32::max);
+    assert!(largest < 2.0 * exact, "a speck's Lbar {largest} against {exact}: {specks:?}");
+}
