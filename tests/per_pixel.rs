@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::ray_caster::{Caster, camera_ray};
+use common::ray_caster::{Caster, camera_ray, pixel_grid};
 use common::scratch::Scratch;
 use firstshot::image::Image;
 use firstshot::render::{RenderOptions, render};
@@ -87,9 +87,8 @@ fn test01_point_light_shadow_is_exact_per_pixel() {
             const N: u32 = 8;
             let mut values = Vec::new();
             let mut kinds = std::collections::BTreeSet::new();
-            for k in 0..N * N {
-                let (sx, sy) = ((k % N) as f64 + 0.5, (k / N) as f64 + 0.5);
-                let (o, d) = camera_ray(&scene.camera, w, h, px as f64 + sx / N as f64, py as f64 + sy / N as f64);
+            for (x, y) in pixel_grid(px, py, N) {
+                let (o, d) = camera_ray(&scene.camera, w, h, x, y);
                 let (value, tri, seen) = direct_along(&caster, o, d, &light);
                 values.push(value);
                 kinds.insert((tri, seen));
@@ -157,9 +156,8 @@ fn test02_area_light_penumbra_converges_to_the_integral_over_the_light() {
         for px in 0..w {
             const N: u32 = 3;
             let mut sum = 0.0;
-            for k in 0..N * N {
-                let (sx, sy) = (((k % N) as f64 + 0.5) / N as f64, ((k / N) as f64 + 0.5) / N as f64);
-                let (o, dir) = camera_ray(&scene.camera, w, h, px as f64 + sx, py as f64 + sy);
+            for (x, y) in pixel_grid(px, py, N) {
+                let (o, dir) = camera_ray(&scene.camera, w, h, x, y);
                 let (value, _, seen) = direct_along(&caster, o, dir, &points);
                 if seen > 0 && seen < points.len() / 2 {
                     penumbra += 1;
@@ -552,9 +550,8 @@ material = "gloss"
         for x in 0..w {
             let mut sum = 0.0;
             let mut on_plane = true;
-            for k in 0..64 {
-                let (sx, sy) = ((k % 8) as f64 / 8.0 + 1.0 / 16.0, (k / 8) as f64 / 8.0 + 1.0 / 16.0);
-                let (o, d) = camera_ray(&scene.camera, w, h, x as f64 + sx, y as f64 + sy);
+            for (px, py) in pixel_grid(x, y, 8) {
+                let (o, d) = camera_ray(&scene.camera, w, h, px, py);
                 let hit = o - d * (o.y / d.y);
                 on_plane &= d.y < 0.0 && hit.x.abs() < 5.99 && hit.z.abs() < 5.99;
                 sum += kd + ks * albedo_at(-d.y);

@@ -83,3 +83,11 @@ pub fn camera_ray(camera: &Camera, width: u32, height: u32, px: f64, py: f64) ->
     let y = (1.0 - 2.0 * py / height as f64) * tan_y;
     (camera.position, (forward + x * right + y * up).normalize())
 }
+
+/// The centres of the cells of an n x n grid over pixel (px, py), row by row, as image
+/// points for `camera_ray`: the camera's samples are uniform over a pixel, so its value
+/// converges to the mean over such points.
+pub fn pixel_grid(px: u32, py: u32, n: u32) -> impl Iterator<Item = (f64, f64)> {
+    (0..n * n)
+        .map(move |k| (px as f64 + ((k % n) as f64 + 0.5) / n as f64, py as f64 + ((k / n) as f64 + 0.5) / n as f64))
+}
