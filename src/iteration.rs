@@ -25,6 +25,38 @@ pub struct BundleScene {
     pub environment: [f32; 3],
 }
 
+/// Bundles a step draws where it draws several (`--bundles-per-step`, `auto_bundles_per_step`), each with its own direction,
+/// together as many lines as one bundle at twice their resolution (`bundle_resolution_for`
+/// halves the automatic choice), and each the gather of one pixel in four: the pixels
+/// (x, y) with x mod 2 + 2 (y mod 2) = q gather through bundle q. One direction a step for
+/// every pixel made the image's error low-frequency: about 92 % of a 200-step image's
+/// variance was which directions the run drew, shared by all pixels, so that averaging 2 x 2
+/// pixels barely reduced it (docs/PERFORMANCE.md, "Where the image's error lies"). With
+/// four bundles a step, neighbouring pixels gather along independent directions and their
+/// errors average out; the state gets four directions a step (four bounces).
+pub const BUNDLES_PER_STEP: u32 = 4;
+
+/// The bundle counts a step may have: one, or four interleaved over 2 x 2 pixels.
+pub const BUNDLES_PER_STEP_CHOICES: [u32; 2] = [1, 4];
+const BUNDLES_PER_STEP_MAX: u32 = 4;
+
+/// Which of a step's bundles: `index` of `per_step` (1 or 4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StepBundle {
+    pub index: u32,
+    pub per_step: u32,
+}
+
+impl StepBundle {
+    /// The only bundle of a step that has one.
+    pub const ONLY: StepBundle = StepBundle { index: 0, per_step: 1 };
+}
+
+/// The pixel stride of the gather's classes for `per_step` bundles a step: 1 or 2.
+pub fn pixel_stride(per_step: u32) -> u32 {
+    if per_step >= 4 { 2 } else { 1 }
+}
+
 /// The bundle of step `step` (the one place a `GpuBundle` is made): direction uniform on
 /// the sphere (stratified over blocks of steps, `rng::stratified_direction`), grid rotated
 /// uniformly about it and shifted by a uniform sub-pixel offset;
@@ -34,13 +66,17 @@ pub struct BundleScene {
 pub fn bundle_of_step(
     seed: u64,
     step: u64,
+    bundle: StepBundle,
     image_step: bool,
     scene: &BundleScene,
     resolution: u32,
     capacity: u32,
 ) -> (GpuBundle, StepRng) {
-    let mut rng = StepRng::new(seed, step);
-    let d = crate::rng::stratified_direction(seed, step);
+    // The bundles of all steps form one sequence: bundle q of step k is its element
+    // k per_step + q (with one bundle a step, element k).
+    let index = step * bundle.per_step as u64 + bundle.index as u64;
+    let mut rng = StepRng::new(seed, index);
+    let d = crate::rng::stratified_direction(seed, index);
     let angle = 2.0 * std::f64::consts::PI * rng.uniform();
     let t1 = d.any_orthonormal_vector();
     let t2 = d.cross(t1);
@@ -65,7 +101,9 @@ pub fn bundle_of_step(
         // J is zero before the first step has written it.
         use_state: (step > 0) as u32,
         image_step: image_step as u32,
-        _pad: [0; 3],
+        pixel_class: bundle.index,
+        pixel_stride: pixel_stride(bundle.per_step),
+        _pad: [0; 1],
     };
     (bundle, rng)
 }
@@ -106,9 +144,41 @@ pub const AUTO_BUNDLE_LINE_PIXELS: f64 = 1.5;
 /// bundled scenes peaked at 256 x 256 and 512 x 512 (docs/PERFORMANCE.md, "Bundle
 /// resolution").
 pub fn auto_bundle_resolution(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> u32 {
+    let needs = bundle_needs(patches, radius, views);
+    let wanted = needs.patches.max(needs.image);
+    let r = (wanted.min(AUTO_BUNDLE_MAX as f64).ceil() as u32).div_ceil(64) * 64;
+    r.clamp(AUTO_BUNDLE_MIN, AUTO_BUNDLE_MAX)
+}
+
+/// The two needs of `auto_bundle_resolution`, before rounding: the resolution that gives the
+/// median patch one line a step, and the one that makes a line at most
+/// `AUTO_BUNDLE_LINE_PIXELS` pixel footprints wide (0 where a rule has nothing to go by).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BundleNeeds {
+    pub patches: f64,
+    pub image: f64,
+}
+
+/// The bundles a step takes unless told (`--bundles-per-step auto`): four where the image
+/// sets the resolution (its need at least twice the patches'), so that each of four bundles
+/// at half of it still meets the patches' need; one where the patches set it. There, four
+/// bundles at half the resolution would
+/// cross a patch a quarter of a line each (their J spikes four times as high, and every
+/// bundle's reflection passes them on) while the per-patch stages (reflect, finalize, each
+/// triangle's rasterisation) run four times: on the Sierpinski scene (patches 704, image
+/// less) four bundles of 352 took twice the time of a step for no lower error, where the
+/// Cornell box (image 256, patches 70 at 256 x 256) reached a third of the squared error in
+/// 1.5 times the time (docs/PERFORMANCE.md, "Four bundles a step").
+pub fn auto_bundles_per_step(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> u32 {
+    let needs = bundle_needs(patches, radius, views);
+    if needs.image >= 2.0 * needs.patches { BUNDLES_PER_STEP } else { 1 }
+}
+
+fn bundle_needs(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> BundleNeeds {
     let sampled = patches.median_sample();
     let mut areas: Vec<f64> = sampled.clone().map(|p| p.area).collect();
-    let mut wanted = crate::scene::tessellate::median(&mut areas).map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
+    let by_patches = crate::scene::tessellate::median(&mut areas).map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
+    let mut wanted: f64 = 0.0;
     for view in views {
         let c = &view.camera;
         let forward = (c.look_at - c.position).normalize_or_zero();
@@ -145,29 +215,28 @@ pub fn auto_bundle_resolution(patches: &Patches, radius: f64, views: &[crate::sc
             wanted = wanted.max(2.0 * radius / footprint);
         }
     }
-    let r = (wanted.min(AUTO_BUNDLE_MAX as f64).ceil() as u32).div_ceil(64) * 64;
-    r.clamp(AUTO_BUNDLE_MIN, AUTO_BUNDLE_MAX)
+    BundleNeeds { patches: by_patches, image: wanted }
 }
 
-/// The last burn-in steps run at the full bundle resolution (`coarse_burn_in`).
-pub const FINE_BURN_IN_STEPS: u32 = 8;
+/// The last burn-in bundles (bounces) run at the full bundle resolution (`coarse_burn_in`).
+pub const FINE_BURN_IN_BUNDLES: u32 = 8;
 /// The coarse burn-in's bundle resolution is the full one divided by this.
 pub const COARSE_BURN_IN_DIVISOR: u32 = 2;
 /// Below this the coarse grid saves too little to be worth a second set of line buffers.
 pub const COARSE_BURN_IN_MIN: u32 = 32;
 
 /// The coarse start of the burn-in: `Some((resolution, steps))` when the first `steps` of a
-/// burn-in of `burn_in` steps run at the smaller bundle `resolution`, a quarter of the
+/// burn-in of `burn_in` steps of `per_step` bundles run at the smaller bundle `resolution`, a quarter of the
 /// lines and fragments. The burn-in only has to bring the state's mean near the fixed
 /// point, and that mean does not depend on the resolution: each step is an unbiased
 /// estimate of the transport of the state before it (random direction, rotation and
 /// shift), so E[J_k] = T^k whatever the grid. What the coarse grid adds is variance
-/// (fewer lines cross each patch); the last `FINE_BURN_IN_STEPS` steps at the full grid let
-/// it decay (each bounce attenuates it by about the albedo squared) before the first image
-/// step.
-pub fn coarse_burn_in(resolution: u32, burn_in: u32) -> Option<(u32, u32)> {
+/// (fewer lines cross each patch); the last `FINE_BURN_IN_BUNDLES` bundles at the full grid
+/// (in whole steps) let it decay (each bounce attenuates it by about the albedo squared)
+/// before the first image step.
+pub fn coarse_burn_in(resolution: u32, burn_in: u32, per_step: u32) -> Option<(u32, u32)> {
     let coarse = resolution / COARSE_BURN_IN_DIVISOR;
-    let steps = burn_in.saturating_sub(FINE_BURN_IN_STEPS);
+    let steps = burn_in.saturating_sub(FINE_BURN_IN_BUNDLES.div_ceil(per_step.max(1)));
     (coarse >= COARSE_BURN_IN_MIN && steps > 0).then_some((coarse, steps))
 }
 
@@ -220,6 +289,9 @@ pub struct GatherBuffers {
 /// The buffers and stages of a step.
 pub struct Iteration {
     bundle: wgpu::Buffer,
+    /// The step's bundles (`write_bundles`), copied one by one into `bundle` in front of
+    /// each bundle's stages, so that a whole step is one submission.
+    step_bundles: wgpu::Buffer,
     counts: wgpu::Buffer,
     heads: wgpu::Buffer,
     tally: wgpu::Buffer,
@@ -293,6 +365,12 @@ impl Iteration {
             label: Some("firstshot.iteration.bundle"),
             size: std::mem::size_of::<GpuBundle>() as u64,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let step_bundles = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("firstshot.iteration.step_bundles"),
+            size: BUNDLES_PER_STEP_MAX as u64 * std::mem::size_of::<GpuBundle>() as u64,
+            usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let StepArrays { outgoing, image_outgoing, image_mean_radiance, sums } = &arrays;
@@ -380,6 +458,7 @@ impl Iteration {
                 image_mean_radiance: image_mean_radiance.pages.clone(),
             },
             bundle,
+            step_bundles,
             counts,
             heads,
             tally,
@@ -392,29 +471,40 @@ impl Iteration {
         })
     }
 
-    /// Writes the bundle uniform of step `step` and returns the step's generator (see
-    /// `bundle_of_step`).
-    pub fn write_bundle(
+    /// Writes the `per_step` bundles of step `step` and returns the generator of its first
+    /// (see `bundle_of_step`), for the step's other random choices.
+    pub fn write_bundles(
         &self,
         queue: &wgpu::Queue,
         seed: u64,
         step: u64,
+        per_step: u32,
         image_step: bool,
         scene: &BundleScene,
     ) -> StepRng {
-        let (bundle, rng) = bundle_of_step(seed, step, image_step, scene, self.resolution, self.capacity);
-        queue.write_buffer(&self.bundle, 0, bytemuck::bytes_of(&bundle));
-        rng
+        let mut first = None;
+        let mut bundles = Vec::with_capacity(per_step as usize);
+        for index in 0..per_step {
+            let which = StepBundle { index, per_step };
+            let (bundle, rng) = bundle_of_step(seed, step, which, image_step, scene, self.resolution, self.capacity);
+            bundles.push(bundle);
+            first.get_or_insert(rng);
+        }
+        queue.write_buffer(&self.step_bundles, 0, bytemuck::cast_slice(&bundles));
+        first.expect("a step has at least one bundle")
     }
 
-    /// The bundle stages of a step, in order (its bundle uniform must already be written):
-    /// J_j and win_j of every patch are replaced by this step's. `render::Renderer` runs
-    /// them, recorded into one encoder or, for the profiler, one by one.
-    pub fn stages<'a>(&'a self, scene: &'a SceneBuffers) -> Vec<Stage<'a>> {
+    /// The stages of bundle `index` of a step, in order (`write_bundles` must have written
+    /// the step): its uniform, then J_j and win_j of every patch replaced by this bundle's.
+    /// `render::Renderer` runs them, recorded into one encoder or, for the profiler, one by
+    /// one.
+    pub fn stages<'a>(&'a self, scene: &'a SceneBuffers, index: u32) -> Vec<Stage<'a>> {
+        let size = std::mem::size_of::<GpuBundle>() as u64;
         vec![
             (
                 "clear",
                 Box::new(move |e: &mut wgpu::CommandEncoder| {
+                    e.copy_buffer_to_buffer(&self.step_bundles, index as u64 * size, &self.bundle, 0, size);
                     e.clear_buffer(&self.max_bits, 0, None);
                     e.clear_buffer(&self.counts, 0, None);
                     e.clear_buffer(&self.heads, 0, None);

@@ -123,6 +123,13 @@ pub(crate) struct RenderArgs {
     /// on the area lights and their windows (default 8; the indirect light every step).
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     window_steps: Option<u32>,
+    /// Bundles each step of the iteration draws: 1, 4, or "auto" (the default unless the
+    /// scene sets it: 4 where the image needs at least twice the lines the patches do, else
+    /// 1). With 4, each pixel of a 2 x 2 block gathers through its own bundle, so that
+    /// neighbouring pixels' errors are independent; the automatic --bundle-resolution is
+    /// halved for them (as many lines a step).
+    #[arg(long, value_name = "N|auto", value_parser = parse_bundles_per_step)]
+    bundles_per_step: Option<BundlesPerStep>,
     /// The camera to render, by name: "camera" for the [camera] table, or a [[cameras]]
     /// entry's name (default: the first of the scene's cameras).
     #[arg(long, value_name = "NAME")]
@@ -448,6 +455,9 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     }
     options.burn_in = args.burn_in.or(options.burn_in);
     options.memory_limit = args.memory_limit.map(|mib| mib << 20);
+    if let Some(b) = args.bundles_per_step {
+        options.bundles_per_step = b.0;
+    }
     if let Some(v) = args.window_steps {
         if v == 0 {
             return Err(usage("--window-steps 0: expected at least 1 step".into()));
@@ -463,6 +473,7 @@ fn read_resume(
     args: &RenderArgs,
     plan: &OutputPlan,
     scene: &scene::Scene,
+    patches: &scene::Patches,
     options: &RenderOptions,
 ) -> Result<Option<Checkpoint>, Failure> {
     if !args.resume {
@@ -487,7 +498,7 @@ fn read_resume(
             path.display()
         )));
     }
-    let burn_in = firstshot::render::burn_in_steps(scene, options);
+    let burn_in = firstshot::render::burn_in_steps(scene, patches, options);
     let pixels: Vec<u64> =
         options.views(scene).iter().map(|v| v.camera.width as u64 * v.camera.height as u64).collect();
     checkpoint.check_numbers(
@@ -590,7 +601,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     for note in &patches.notes {
         say.say(format!("note: {note}"));
     }
-    let resume = read_resume(&args, &plan, &scene, &options)?;
+    let resume = read_resume(&args, &plan, &scene, &patches, &options)?;
     let ctx = Context::new(&args.adapter)?;
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
     say.say(format!("adapter: {}", ctx.summary));
@@ -757,5 +768,22 @@ fn parse_bundle_resolution(value: &str) -> std::result::Result<BundleResolution,
             .parse()
             .map(|r| BundleResolution(Some(r)))
             .map_err(|_| format!("expected a number of pixels or \"auto\", got {value:?}")),
+    }
+}
+
+/// `--bundles-per-step`: 1, 4, or "auto" (`None`).
+#[derive(Debug, Clone, Copy)]
+struct BundlesPerStep(Option<u32>);
+
+fn parse_bundles_per_step(value: &str) -> std::result::Result<BundlesPerStep, String> {
+    let choices = firstshot::iteration::BUNDLES_PER_STEP_CHOICES;
+    match value {
+        "auto" => Ok(BundlesPerStep(None)),
+        _ => value
+            .parse::<u32>()
+            .ok()
+            .filter(|n| choices.contains(n))
+            .map(|n| BundlesPerStep(Some(n)))
+            .ok_or_else(|| format!("expected 1, 4 or \"auto\", got {value:?}")),
     }
 }

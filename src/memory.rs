@@ -137,9 +137,10 @@ pub fn predict(
             let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
             let capacity = |resolution| initial_fragment_capacity(options, limits, patches, radius, resolution);
             // The coarse burn-in's lines and fragments live beside the full grid's while it runs.
-            let burn_in = crate::render::burn_in_steps(scene, options);
-            let (coarse_lines, coarse_fragments) = crate::iteration::coarse_burn_in(resolution, burn_in)
-                .map_or((0, 0), |(c, _)| (c as u64 * c as u64, capacity(c)));
+            let burn_in = crate::render::burn_in_steps(scene, patches, options);
+            let (coarse_lines, coarse_fragments) =
+                crate::iteration::coarse_burn_in(resolution, burn_in, options.bundles_per_step_for(scene, patches))
+                    .map_or((0, 0), |(c, _)| (c as u64 * c as u64, capacity(c)));
             (r * r + coarse_lines, capacity(resolution) + coarse_fragments)
         }
     };

@@ -96,6 +96,10 @@ pub struct RenderOptions {
     /// The cameras whose images one run makes from the same iteration (`--all-cameras`), each
     /// at its own `width` x `height`; empty: `scene.camera` at `width` x `height` above.
     pub cameras: Vec<NamedCamera>,
+    /// Bundles a step draws, 1 or 4 (`iteration::BUNDLES_PER_STEP`): with 4, each pixel of a
+    /// 2 x 2 block gathers through its own; `None`: chosen from the patches and the views
+    /// (`iteration::auto_bundles_per_step`).
+    pub bundles_per_step: Option<u32>,
 }
 
 impl RenderOptions {
@@ -120,15 +124,29 @@ impl RenderOptions {
             burn_in: None,
             window_steps: DEFAULT_WINDOW_STEPS,
             cameras: Vec::new(),
+            bundles_per_step: scene.settings.bundles_per_step,
         }
     }
 
     /// The bundle resolution of a render of `patches`: the one asked for, else the automatic
-    /// choice for them and the views (`iteration::auto_bundle_resolution`).
+    /// choice for them and the views (`iteration::auto_bundle_resolution`), which is for one
+    /// bundle a step: four bundles a step take half of it each, as many lines a step in all
+    /// (each patch crossed as often), each line as wide against the pixels that gather
+    /// through it (every other pixel in x and y).
     pub fn bundle_resolution_for(&self, scene: &Scene, patches: &Patches) -> u32 {
         self.bundle_resolution.unwrap_or_else(|| {
             let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
-            crate::iteration::auto_bundle_resolution(patches, radius, &self.views(scene))
+            let one = crate::iteration::auto_bundle_resolution(patches, radius, &self.views(scene));
+            one / crate::iteration::pixel_stride(self.bundles_per_step_for(scene, patches))
+        })
+    }
+
+    /// The bundles a step of a render of `patches` draws: the number asked for, else the
+    /// automatic choice for them and the views (`iteration::auto_bundles_per_step`).
+    pub fn bundles_per_step_for(&self, scene: &Scene, patches: &Patches) -> u32 {
+        self.bundles_per_step.unwrap_or_else(|| {
+            let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+            crate::iteration::auto_bundles_per_step(patches, radius, &self.views(scene))
         })
     }
 
@@ -195,6 +213,8 @@ pub struct RenderStats {
     /// (`memory::MemoryPlan`).
     pub memory: crate::memory::MemoryPlan,
     pub bundle_resolution: u32,
+    /// Bundles each step drew (`--bundles-per-step`), each at `bundle_resolution`.
+    pub bundles_per_step: u32,
     /// Fragment capacity of a bundle step (grown if a step ever needed more).
     pub bundle_capacity: u32,
     /// Median wall time of a step, measured over batches of steps.
@@ -278,10 +298,13 @@ impl Hooks for NoHooks {}
 
 /// Steps of the iteration before the first one averaged into the image: `--burn-in`, or
 /// the scene's default; none without an iteration.
-pub fn burn_in_steps(scene: &Scene, options: &RenderOptions) -> u32 {
+pub fn burn_in_steps(scene: &Scene, patches: &Patches, options: &RenderOptions) -> u32 {
     match options.iterations {
         0 => 0,
-        _ => options.burn_in.unwrap_or_else(|| default_burn_in(scene)),
+        // The default is in bounces; each of a step's bundles is one.
+        _ => options
+            .burn_in
+            .unwrap_or_else(|| default_burn_in(scene).div_ceil(options.bundles_per_step_for(scene, patches))),
     }
 }
 
@@ -606,6 +629,8 @@ pub struct Renderer<'a> {
     options: RenderOptions,
     /// The bundle resolution in use (`RenderOptions::bundle_resolution_for`).
     bundle_resolution: u32,
+    /// The bundles a step draws (`RenderOptions::bundles_per_step_for`).
+    per_step: u32,
     buffers: SceneBuffers,
     direct: DirectLights,
     /// One per camera (`RenderOptions::views`), never empty.
@@ -651,7 +676,12 @@ impl<'a> Renderer<'a> {
         // checkpoint or shard carries (the choice follows from them and the scene).
         let given = options;
         let bundle_resolution = options.bundle_resolution_for(scene, patches);
-        let resolved = RenderOptions { bundle_resolution: Some(bundle_resolution), ..options.clone() };
+        let per_step = options.bundles_per_step_for(scene, patches);
+        let resolved = RenderOptions {
+            bundle_resolution: Some(bundle_resolution),
+            bundles_per_step: Some(per_step),
+            ..options.clone()
+        };
         let options = &resolved;
         check_options(scene, options)?;
         check_limits(&ctx.limits(), patches, options)?;
@@ -677,8 +707,8 @@ impl<'a> Renderer<'a> {
                 initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, bundle_resolution);
             Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity)?)
         };
-        let burn_in = burn_in_steps(scene, options);
-        let coarse = match (&iteration, crate::iteration::coarse_burn_in(bundle_resolution, burn_in)) {
+        let burn_in = burn_in_steps(scene, patches, options);
+        let coarse = match (&iteration, crate::iteration::coarse_burn_in(bundle_resolution, burn_in, per_step)) {
             (Some(full), Some((resolution, steps))) => {
                 let capacity = initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, resolution);
                 Some((full.resized(ctx, &buffers, resolution, capacity)?, steps))
@@ -698,7 +728,8 @@ impl<'a> Renderer<'a> {
                 let band_rows = options
                     .image_band_rows
                     .unwrap_or_else(|| crate::stages::image_estimate::band_rows(&device.limits(), camera.width));
-                let estimate = ImageEstimate::new(device, &buffers, &item_buffer, &direct, gather, band_rows);
+                let stride = crate::iteration::pixel_stride(per_step);
+                let estimate = ImageEstimate::new(device, &buffers, &item_buffer, &direct, gather, band_rows, stride);
                 estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);
                 ViewImage { name, camera, item_buffer, estimate }
             })
@@ -708,6 +739,7 @@ impl<'a> Renderer<'a> {
             scene,
             options: given.clone(),
             bundle_resolution,
+            per_step,
             near: buffers.radius * 1e-5,
             buffers,
             direct,
@@ -774,8 +806,15 @@ impl<'a> Renderer<'a> {
     pub fn write_step(&mut self, k: u32) {
         let queue = &self.ctx.queue;
         let image_step = k >= self.image_start;
-        let mut rng =
-            self.iteration_at(k).write_bundle(queue, self.options.seed, k as u64, image_step, &self.bundle_scene());
+        let per_step = self.per_step;
+        let mut rng = self.iteration_at(k).write_bundles(
+            queue,
+            self.options.seed,
+            k as u64,
+            per_step,
+            image_step,
+            &self.bundle_scene(),
+        );
         if image_step {
             let i = k - self.image_start;
             let u = [rng.uniform(), rng.uniform()];
@@ -835,12 +874,31 @@ impl<'a> Renderer<'a> {
         self.ctx.queue.submit([encoder.finish()]);
     }
 
-    /// The stages of step `k`, in order (its uniforms written by `write_step`): the bundle
-    /// stages of the iteration, then, past the burn-in, the image stages.
+    /// The stages of step `k`, in order (its uniforms written by `write_step`): for each of
+    /// its bundles the bundle stages of the iteration, then, past the burn-in, the image
+    /// stages: after the first bundle the camera item buffer and the direct light (when
+    /// due) and each bundle's gather after its own stages (the pixels of its class).
     pub fn step_stages(&self, k: u32) -> Vec<Stage<'_>> {
-        let mut stages = self.iteration_at(k).stages(&self.buffers);
-        if k >= self.image_start {
-            stages.extend(self.image_stages(self.direct_due, true));
+        let iteration = self.iteration_at(k);
+        let mut stages = Vec::new();
+        for index in 0..self.per_step {
+            stages.extend(iteration.stages(&self.buffers, index));
+            if k >= self.image_start {
+                match index {
+                    0 => stages.extend(self.image_stages(self.direct_due, true)),
+                    _ => stages.extend(self.gather_stages()),
+                }
+            }
+        }
+        stages
+    }
+
+    /// Every view's gather through the bundle last run (the pixels of its class).
+    fn gather_stages(&self) -> Vec<Stage<'_>> {
+        let mut stages: Vec<Stage<'_>> = Vec::new();
+        for view in &self.views {
+            let estimate = &view.estimate;
+            stages.push(("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e))));
         }
         stages
     }
@@ -904,9 +962,10 @@ impl<'a> Renderer<'a> {
         timer.run(self.ctx, &stages)
     }
 
-    /// Fragments (surfaces on lines) of the last step.
+    /// Fragments (surfaces on lines) of the last step: its last bundle's, times the bundles a
+    /// step (the bundles differ only in direction, so they hold about as many each).
     pub fn fragments(&self) -> Result<u64> {
-        self.iteration().fragments(self.ctx)
+        Ok(self.iteration().fragments(self.ctx)? * self.per_step as u64)
     }
 
     /// The last step's fragments past their lines' buckets (spill nodes; `LINE_BUCKET`).
@@ -1014,7 +1073,7 @@ impl<'a> Renderer<'a> {
         let (o, fs) = (&self.options, self.first_shot.as_ref());
         // The coarse burn-in planned, as `new` planned it (its iteration is gone by now).
         let coarse_plan = match self.iteration {
-            Some(_) => crate::iteration::coarse_burn_in(self.bundle_resolution, self.burn_in),
+            Some(_) => crate::iteration::coarse_burn_in(self.bundle_resolution, self.burn_in, self.per_step),
             None => None,
         };
         Ok(Rendered {
@@ -1040,6 +1099,7 @@ impl<'a> Renderer<'a> {
                 shadow_atlas_texels: self.direct.atlas_texels(),
                 memory: crate::memory::MemoryPlan { peak_rss_bytes: crate::memory::peak_rss(), ..self.memory.clone() },
                 bundle_resolution: self.bundle_resolution,
+                bundles_per_step: self.per_step,
                 bundle_capacity: iteration_stats.capacity,
                 iteration_ms_median: iteration_stats.step_ms_median,
                 iteration_ms: iteration_stats.ms,

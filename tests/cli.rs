@@ -145,7 +145,7 @@ fn test03_no_first_shot_with_a_point_light_is_a_usage_error() {
 }
 
 /// The stats keys of CLI.md.
-const STATS_KEYS: [&str; 13] = [
+const STATS_KEYS: [&str; 14] = [
     "adapter",
     "patches",
     "memory",
@@ -153,6 +153,7 @@ const STATS_KEYS: [&str; 13] = [
     "image",
     "hemicube_resolution",
     "bundle_resolution",
+    "bundles_per_step",
     "first_shot",
     "first_shot_ms",
     "iterations",
@@ -213,8 +214,10 @@ fn test04_tiny_render_writes_exr_png_and_stats() {
     // From the scene's [settings]: seed 1; 2 x 2 light cells give 9 samples. No
     // bundle_resolution there, so the automatic one: for the 40 mm patches (median area
     // about 378 mm^2) in a bounding sphere of radius 480 mm, 2 x 480 x sqrt(2 / 378) = 70,
-    // rounded up to 128 (the 32 x 32 image asks for less).
+    // rounded up to 128 (the 32 x 32 image asks for less); the patches set it, so one
+    // bundle a step (iteration::auto_bundles_per_step).
     assert_eq!(json["bundle_resolution"], 128);
+    assert_eq!(json["bundles_per_step"], 1);
     assert_eq!(json["seed"], 1);
     assert_eq!(json["light_samples"], 9);
     assert_eq!(json["first_shot"], true);

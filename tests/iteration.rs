@@ -219,13 +219,14 @@ fn test04_fragment_overflow_is_detected_and_redone_exactly() {
     let run = |capacity: Option<u64>| {
         let mut o = options(&scene, 20, 3);
         o.bundle_capacity = capacity;
-        // A coarse start (12 steps at 32): its own list overflows and grows too.
+        // A coarse start (18 steps at 32, the last 2 steps of four bundles at 64): its own
+        // list overflows and grows too.
         o.burn_in = Some(20);
         render(&ctx, &scene, &patches, &o).unwrap()
     };
     let (normal, tight) = (run(None), run(Some(16)));
     assert!(tight.stats.bundle_capacity > 16, "the list must have grown");
-    assert_eq!(tight.stats.coarse_burn_in_steps, 12);
+    assert_eq!(tight.stats.coarse_burn_in_steps, 18);
     let bits = |i: &firstshot::image::Image| i.pixels.iter().flat_map(|p| p.map(f32::to_bits)).collect::<Vec<u32>>();
     assert_eq!(bits(&normal.image), bits(&tight.image), "redone steps must give exactly the image of a run with room");
 }
@@ -268,6 +269,9 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
     let state_after = |n: u32| {
         let mut o = options(&scene, n, 5);
         o.burn_in = Some(0);
+        // One bundle a step, so that a step moves the history by one (four bundles move it by
+        // four, each shifting in its own J as here).
+        o.bundles_per_step = Some(1);
         let mut hooks = FinalState::default();
         firstshot::render::render_with(&ctx, &scene, &patches, &o, None, &mut hooks).unwrap();
         bytemuck::pod_collect_to_vec::<u8, GpuPatchState>(&hooks.0.unwrap())
@@ -397,14 +401,18 @@ fn test08_the_coarse_burn_in_keeps_the_expected_state() {
     let (scene, patches) = furnace(albedo as f32, le as f32);
     let o = |k: u32| le * (1.0 - albedo.powi(k as i32 + 1)) / (1.0 - albedo);
     let burn_in = 30;
-    let (coarse, steps) = firstshot::iteration::coarse_burn_in(64, burn_in).expect("a coarse start at 64");
-    assert_eq!((coarse, steps), (32, burn_in - firstshot::iteration::FINE_BURN_IN_STEPS));
+    // Four bundles a step keep 8 bundles (2 steps) fine; the run below takes one a step, so
+    // that a step is a bounce of the series.
+    assert_eq!(firstshot::iteration::coarse_burn_in(64, burn_in, 4), Some((32, burn_in - 2)));
+    let (coarse, steps) = firstshot::iteration::coarse_burn_in(64, burn_in, 1).expect("a coarse start at 64");
+    assert_eq!((coarse, steps), (32, burn_in - firstshot::iteration::FINE_BURN_IN_BUNDLES));
     let area: f64 = patches.patches.iter().map(|p| p.area).sum();
     let state_bytes = std::mem::size_of::<firstshot::layout::GpuPatchState>();
     let mut means = Vec::new();
     for seed in 1..=16 {
         let mut opts = options(&scene, 8, seed);
         opts.burn_in = Some(burn_in);
+        opts.bundles_per_step = Some(1);
         let mut renderer = Renderer::new(&ctx, &scene, &patches, &opts, &mut NoHooks).unwrap();
         assert_eq!(renderer.advance_to(0, steps, &mut NoHooks).unwrap(), steps);
         let state = renderer.read_state().unwrap();
@@ -434,6 +442,7 @@ fn test08_the_coarse_burn_in_keeps_the_expected_state() {
     // The whole run reports its coarse start.
     let mut opts = options(&scene, 2, 1);
     opts.burn_in = Some(burn_in);
+    opts.bundles_per_step = Some(1);
     let done = render(&ctx, &scene, &patches, &opts).unwrap();
     assert_eq!((done.stats.coarse_bundle_resolution, done.stats.coarse_burn_in_steps), (Some(coarse), steps));
     assert_eq!(done.stats.burn_in_steps, burn_in);

@@ -13,6 +13,7 @@ use firstshot::scene::{Material, MaterialKind, Patches};
 use glam::DVec3;
 
 const RESOLUTION: u32 = 64;
+const PER_STEP: u32 = 4;
 const BUNDLE_STAGES: [&str; 5] = ["clear", "reflect", "visibility", "transfer", "finalize"];
 
 /// A closed diffuse room with glowing walls, seen from inside: every step has work in
@@ -45,22 +46,30 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
         // Steps 0 and 2 estimate the direct light and gather, step 1 only gathers.
         direct_passes: 1,
         window_steps: 2,
+        // Four bundles a step: each runs the bundle stages and its pixels' gather.
+        bundles_per_step: Some(PER_STEP),
         ..RenderOptions::from_scene(&scene)
     };
     let mut renderer = Renderer::new(ctx, &scene, &patches, &options, &mut NoHooks).unwrap();
-    let timer = StageTimer::new(ctx, 16);
+    let timer = StageTimer::new(ctx, 64);
     for k in 0..3 {
         if profiled {
             let times = renderer.profile_step(k, &timer, vec![]).unwrap();
             let names: Vec<&str> = times.iter().map(|t| t.name).collect();
             // The direct light on the first `direct_passes` steps and then every
             // `window_steps` steps (`render::direct_light_due`), the gather every step.
+            // Each of the step's bundles runs the bundle stages and then the gather of its
+            // pixels; the camera and the direct light come once, after the first bundle.
             let mut expected = BUNDLE_STAGES.to_vec();
             expected.push("camera");
             if k % options.window_steps == 0 {
                 expected.extend(["light_windows", "direct"]);
             }
             expected.push("gather");
+            for _ in 1..PER_STEP {
+                expected.extend(BUNDLE_STAGES);
+                expected.push("gather");
+            }
             assert_eq!(names, expected, "step {k}");
             assert!(times.iter().all(|t| t.wall_ms >= 0.0));
             assert_eq!(times.iter().all(|t| t.gpu_ms.is_some()), timer.has_timestamps());
@@ -69,7 +78,8 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
         }
     }
     let radius = firstshot::gpu::scene_buffers::bounding_sphere(&patches).1;
-    let bound = firstshot::iteration::fragment_bound(&patches, radius, RESOLUTION);
+    // `fragments` counts the step's bundles together.
+    let bound = firstshot::iteration::fragment_bound(&patches, radius, RESOLUTION) * PER_STEP as u64;
     let image = renderer.read_image().unwrap().pixels;
     (renderer.read_state().unwrap(), image, renderer.fragments().unwrap(), bound)
 }

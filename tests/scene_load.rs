@@ -58,7 +58,14 @@ fn test01_cornell_box_loads() {
     assert_eq!(scene.environment, [0.0; 3]);
     assert_eq!(
         scene.settings,
-        Settings { patch_size: 40.0, hemicube_resolution: 512, bundle_resolution: None, iterations: 1000, seed: 1 }
+        Settings {
+            patch_size: 40.0,
+            hemicube_resolution: 512,
+            bundle_resolution: None,
+            iterations: 1000,
+            seed: 1,
+            bundles_per_step: None,
+        }
     );
     let [Light::Area { radiance, subdivisions, .. }] = scene.lights[..] else {
         panic!("expected one area light: {:?}", scene.lights);
@@ -431,6 +438,11 @@ fn test12_settings_and_environment_refusals() {
     assert_contains(&refused(&with("bundle_resolution = \"fine\""), "settings.bundle_resolution"), "\"auto\"");
     assert_eq!(load_str(&with("bundle_resolution = \"auto\""), source()).unwrap().settings.bundle_resolution, None);
     assert_eq!(load_str(&with("bundle_resolution = 96"), source()).unwrap().settings.bundle_resolution, Some(96));
+    assert_contains(&refused(&with("bundles_per_step = 2"), "settings.bundles_per_step"), "1, 4 or");
+    refused(&with("bundles_per_step = 0"), "settings.bundles_per_step");
+    refused(&with("bundles_per_step = \"four\""), "settings.bundles_per_step");
+    assert_eq!(load_str(&with("bundles_per_step = 1"), source()).unwrap().settings.bundles_per_step, Some(1));
+    assert_eq!(load_str(&with("bundles_per_step = \"auto\""), source()).unwrap().settings.bundles_per_step, None);
     refused(&with("iterations = -1"), "settings.iterations");
     refused(&with("seed = -1"), "settings.seed");
     let scene = load_str(&with("iterations = 0\nseed = 7\npatch_size = 0.5"), source()).unwrap();

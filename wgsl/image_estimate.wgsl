@@ -702,10 +702,17 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
 @compute @workgroup_size(8, 8)
 fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
+    // Only this bundle's pixels: (x, y) with x mod stride + stride (y mod stride) = class
+    // (with four bundles a step, each pixel of a 2 x 2 block gathers through its own); the
+    // host dispatches a grid a stride's square smaller.
+    let stride = bundle.pixel_stride;
+    let pixel_class = vec2<u32>(bundle.pixel_class % stride, bundle.pixel_class / stride);
+    let first_row = (pixel_class.y + stride - params.first_row % stride) % stride;
     // This band's rows: its image_sum holds them alone, from params.first_row on.
-    let xy = vec2<u32>(gid.x, gid.y + params.first_row);
-    let pixel = gid.y * size.x + gid.x;
-    if (gid.x >= size.x || xy.y >= size.y || pixel >= arrayLength(&image_sum)) {
+    let local = vec2<u32>(gid.x * stride + pixel_class.x, gid.y * stride + first_row);
+    let xy = vec2<u32>(local.x, local.y + params.first_row);
+    let pixel = local.y * size.x + local.x;
+    if (local.x >= size.x || xy.y >= size.y || pixel >= arrayLength(&image_sum)) {
         return;
     }
     let at = seen(xy);

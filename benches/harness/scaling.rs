@@ -79,14 +79,19 @@ fn measure(
         per_repeat.push(median(&session.time_batches(batches, BATCH).map_err(|e| e.to_string())?.step_ms));
         fragments.push(session.fragments().map_err(|e| e.to_string())? as f64);
     }
-    let timer = StageTimer::new(ctx, 16);
+    let timer = StageTimer::new(ctx, 128);
     let mut stage_times: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     for _ in 0..2 {
         let (times, f) = session.profile_step(&timer).map_err(|e| e.to_string())?;
         fragments.push(f as f64);
         let idle = times.iter().find(|t| t.name == IDLE).map_or(0.0, |t| t.wall_ms);
+        // A stage that runs several times a step (one per bundle) counts with its sum.
+        let mut step: BTreeMap<String, f64> = BTreeMap::new();
         for t in times.iter().filter(|t| t.name != IDLE) {
-            stage_times.entry(t.name.to_string()).or_default().push(own_time(t.wall_ms, t.gpu_ms, idle).0);
+            *step.entry(t.name.to_string()).or_default() += own_time(t.wall_ms, t.gpu_ms, idle).0;
+        }
+        for (name, ms) in step {
+            stage_times.entry(name).or_default().push(ms);
         }
     }
     Ok(Row {

@@ -5,7 +5,7 @@
 use crate::session::{IDLE, Session, copy_bandwidth, own_time, stage_bytes};
 use crate::stats::{Summary, summary};
 use crate::{Config, LoadedScene, Machine, Slot, guarded, load_scene, print_table, spread, write_json};
-use firstshot::gpu::profile::StageTimer;
+use firstshot::gpu::profile::{StageTime, StageTimer};
 use firstshot::render::render;
 use serde::Serialize;
 
@@ -128,28 +128,30 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<Measured, St
     let batches = if config.quick { 2 } else { 2 * config.repeats.max(3) };
     let timed = session.time_batches(batches, BATCH).map_err(|e| e.to_string())?;
     let (batch_step_ms, host_step_ms) = (summary(&timed.step_ms), summary(&timed.host_ms));
-    let timer = StageTimer::new(&ctx, 16);
+    // Room for every stage of a step of four bundles and several views.
+    let timer = StageTimer::new(&ctx, 128);
     let mut profiles = Vec::new();
     let mut fragments = Vec::new();
     for _ in 0..if config.quick { 2 } else { PROFILED_STEPS } {
         let (times, f) = session.profile_step(&timer).map_err(|e| e.to_string())?;
-        profiles.push(times);
+        profiles.push(merge_repeated_stages(times));
         fragments.push(f as f64);
     }
     let copy = copy_bandwidth(&ctx).map_err(|e| e.to_string())?;
     let fragments_per_step = summary(&fragments);
     let sizes = session.sizes(fragments_per_step.median as u64);
-    let names: Vec<&str> = profiles[0].iter().map(|t| t.name).collect();
-    let idle_ms = summary(&profiles.iter().map(|p| p[0].wall_ms).collect::<Vec<_>>()).median;
+    let names: Vec<&str> = profiles[0].iter().map(|t| t.0.name).collect();
+    let idle_ms = summary(&profiles.iter().map(|p| p[0].0.wall_ms).collect::<Vec<_>>()).median;
     let mut stages: Vec<StageRow> = names
         .iter()
         .enumerate()
         .map(|(i, name)| {
-            let wall = summary(&profiles.iter().map(|p| p[i].wall_ms).collect::<Vec<_>>());
-            let gpu: Vec<f64> = profiles.iter().filter_map(|p| p[i].gpu_ms).collect();
+            let wall = summary(&profiles.iter().map(|p| p[i].0.wall_ms).collect::<Vec<_>>());
+            let gpu: Vec<f64> = profiles.iter().filter_map(|p| p[i].0.gpu_ms).collect();
             let gpu = (gpu.len() == profiles.len()).then(|| summary(&gpu));
-            let (ms, gpu_plausible) = own_time(wall.median, gpu.map(|g| g.median), idle_ms);
-            let bytes = stage_bytes(name, sizes);
+            let runs = profiles[0][i].1 as f64;
+            let (ms, gpu_plausible) = own_time(wall.median, gpu.map(|g| g.median), runs * idle_ms);
+            let bytes = runs * stage_bytes(name, sizes);
             let gb_per_s = bytes / (ms.max(1e-6) * 1e-3) / 1e9;
             StageRow {
                 name: name.to_string(),
@@ -337,4 +339,22 @@ fn print_summary(cases: &[Case]) {
             m.stage_wall_sum_ms, m.stage_sum_ms
         );
     }
+}
+
+/// A step's stages with the same name added together, in the order of their first run, each
+/// with how many runs it adds: a step of four bundles runs the bundle stages and the gather
+/// four times, a step of several views the image stages once per view.
+fn merge_repeated_stages(times: Vec<StageTime>) -> Vec<(StageTime, u32)> {
+    let mut merged: Vec<(StageTime, u32)> = Vec::new();
+    for t in times {
+        match merged.iter_mut().find(|(m, _)| m.name == t.name) {
+            Some((m, runs)) => {
+                m.wall_ms += t.wall_ms;
+                m.gpu_ms = m.gpu_ms.zip(t.gpu_ms).map(|(a, b)| a + b);
+                *runs += 1;
+            }
+            None => merged.push((t, 1)),
+        }
+    }
+    merged
 }

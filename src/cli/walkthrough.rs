@@ -110,12 +110,12 @@ pub fn run(
     let mut plan = OutputPlan::with_images(&exr, &exrs, args.stats.as_deref(), scene_path, false)?;
     firstshot::render::check_options(scene, &options)?;
     let fingerprint = fingerprint(scene, &options, &path, frames, steps);
-    let burn_in = firstshot::render::burn_in_steps(scene, &options);
+    let patches = firstshot::scene::tessellate(scene, options.patch_size)?;
+    let burn_in = firstshot::render::burn_in_steps(scene, &patches, &options);
     let resume = match args.resume {
         false => None,
         true => Some(read_resume(&plan, fingerprint, burn_in, steps, frames)?),
     };
-    let patches = firstshot::scene::tessellate(scene, options.patch_size)?;
     let ctx = Context::new(&args.adapter)?;
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
     say.say(format!("adapter: {}", ctx.summary));

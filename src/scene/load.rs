@@ -22,7 +22,8 @@ const TOP_KEYS: &[&str] = &["format", "camera", "cameras", "environment", "setti
 const CAMERA_KEYS: &[&str] = &["position", "look_at", "up", "fov_y", "width", "height"];
 const NAMED_CAMERA_KEYS: &[&str] = &["name", "position", "look_at", "up", "fov_y", "width", "height"];
 const ENVIRONMENT_KEYS: &[&str] = &["radiance"];
-const SETTINGS_KEYS: &[&str] = &["patch_size", "hemicube_resolution", "bundle_resolution", "iterations", "seed"];
+const SETTINGS_KEYS: &[&str] =
+    &["patch_size", "hemicube_resolution", "bundle_resolution", "bundles_per_step", "iterations", "seed"];
 const TRANSFORM_KEYS: &[&str] = &["scale", "rotate", "translate"];
 const SHAPE_TYPES: &str = "\"quad\", \"triangle\", \"mesh\", \"gltf\", \"box\" or \"sierpinski\"";
 
@@ -220,6 +221,19 @@ fn settings(t: &Tbl) -> Result<Settings> {
             Some("auto") => None,
             Some(_) => return Err(r.expected("an integer or \"auto\"")),
             None => Some(r.integer(1, MAX_RESOLUTION)? as u32),
+        };
+    }
+    if let Some(b) = t.get("bundles_per_step") {
+        s.bundles_per_step = match b.value.as_str() {
+            Some("auto") => None,
+            Some(_) => return Err(b.expected("1, 4 or \"auto\"")),
+            None => {
+                let n = b.integer(1, 4)? as u32;
+                if !crate::iteration::BUNDLES_PER_STEP_CHOICES.contains(&n) {
+                    return Err(b.expected("1, 4 or \"auto\""));
+                }
+                Some(n)
+            }
         };
     }
     if let Some(i) = t.get("iterations") {

@@ -89,6 +89,9 @@ pub struct Settings {
     pub bundle_resolution: Option<u32>,
     pub iterations: u32,
     pub seed: u64,
+    /// Bundles a step draws, 1 or 4; `None`: chosen from the patches and the image
+    /// (`iteration::auto_bundles_per_step`).
+    pub bundles_per_step: Option<u32>,
 }
 
 impl Default for Settings {
@@ -99,6 +102,7 @@ impl Default for Settings {
             bundle_resolution: None,
             iterations: 100,
             seed: 1,
+            bundles_per_step: None,
         }
     }
 }

@@ -103,11 +103,15 @@ pub struct ImageEstimate {
     gather_group: wgpu::BindGroup,
     width: u32,
     height: u32,
+    /// 1, or 2 when a step has four bundles and each gathers one pixel of every 2 x 2
+    /// (`iteration::pixel_stride`): the gather's grid is this much smaller on each side.
+    pixel_stride: u32,
 }
 
 impl ImageEstimate {
     /// `gather`: the bundle buffers of the iteration, or `None` for direct-light-only passes.
     /// `band_rows`: rows per band of the image sum (`band_rows`, or fewer to test the bands).
+    /// `pixel_stride`: `iteration::pixel_stride` of the step's bundles.
     pub fn new(
         device: &wgpu::Device,
         scene: &SceneBuffers,
@@ -115,6 +119,7 @@ impl ImageEstimate {
         direct: &DirectLights,
         gather: Option<&GatherBuffers>,
         band_rows: u32,
+        pixel_stride: u32,
     ) -> Self {
         let built = SPEC.build_paged(device, scene.paging());
         // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
@@ -180,6 +185,7 @@ impl ImageEstimate {
             gather_group,
             width: camera.width,
             height: camera.height,
+            pixel_stride: pixel_stride.max(1),
         }
     }
 
@@ -231,14 +237,16 @@ impl ImageEstimate {
         self.record(encoder, "direct", &self.direct_pipeline, 0);
     }
 
-    /// Records one estimate of every pixel's indirect light G, gathered through this step's
-    /// bundle (reads the camera item buffer of this pass).
+    /// Records one estimate of the indirect light G of the pixels of the last bundle's class
+    /// (every pixel with one bundle a step), gathered through that bundle (reads the camera
+    /// item buffer of this pass).
     /// (Two passes a band: `gather`, which lists the pixels near their patch's edge, then
     /// `gather_edges` for those.)
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
         for band in &self.bands {
             encoder.clear_buffer(&band.edges, 0, Some(4));
-            let groups = SPEC.grid("gather", [self.width, band.rows]);
+            let stride = self.pixel_stride;
+            let groups = SPEC.grid("gather", [self.width.div_ceil(stride), band.rows.div_ceil(stride)]);
             let bind_groups = [&band.groups[1], &self.direct_group, &self.gather_group];
             kernel::dispatch(encoder, "firstshot.image_estimate.gather", &self.gather_pipeline, &bind_groups, groups);
             let edges = (crate::layout::EDGE_WORKGROUPS, 1);

@@ -138,6 +138,8 @@ struct Bundle {
     capacity: u32,
     use_state: u32,
     image_step: u32,      // 1 past the burn-in: this step's K joins diffuse_sum
+    pixel_class: u32,     // the gather's pixels: x mod stride + stride (y mod stride) = class
+    pixel_stride: u32,    // 1, or 2 with four interleaved bundles a step
 }
 
 // Which way patch j looks along a bundle: +1 if its front faces +d, else -1 (s_j).
