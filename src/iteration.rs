@@ -27,8 +27,9 @@ pub struct BundleScene {
 
 /// Bundles a step draws where it draws several (`--bundles-per-step`, `auto_bundles_per_step`), each with its own direction,
 /// together as many lines as one bundle at twice their resolution (`bundle_resolution_for`
-/// halves the automatic choice), and each the gather of one pixel in four: the pixels
-/// (x, y) with x mod 2 + 2 (y mod 2) = q gather through bundle q. One direction a step for
+/// halves the automatic choice), and each the gather of one pixel in four: one pixel of
+/// every 2 x 2 block gathers through bundle q (which one, shuffled per block and step:
+/// `class_pixel` in wgsl/image_estimate.wgsl). One direction a step for
 /// every pixel made the image's error low-frequency: about 92 % of a 200-step image's
 /// variance was which directions the run drew, shared by all pixels, so that averaging 2 x 2
 /// pixels barely reduced it (docs/PERFORMANCE.md, "Where the image's error lies"). With
@@ -103,7 +104,8 @@ pub fn bundle_of_step(
         image_step: image_step as u32,
         pixel_class: bundle.index,
         pixel_stride: pixel_stride(bundle.per_step),
-        _pad: [0; 1],
+        // The step's, not the bundle's: its four bundles must split each block among them.
+        pixel_shuffle: (crate::rng::splitmix64(seed ^ step.wrapping_mul(0x9e37_79b9_7f4a_7c15)) >> 32) as u32,
     };
     (bundle, rng)
 }

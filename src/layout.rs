@@ -284,13 +284,17 @@ pub struct GpuBundle {
     pub use_state: u32,
     /// 1 on an image step (past the burn-in): its J joins the running sum of the state.
     pub image_step: u32,
-    /// The image's gather through this bundle takes the pixels (x, y) with
-    /// x mod pixel_stride + pixel_stride (y mod pixel_stride) = pixel_class: one class of
-    /// the interleaved bundles of a step (`iteration::BUNDLES_PER_STEP`).
+    /// The image's gather through this bundle takes one pixel of each pixel_stride x
+    /// pixel_stride block (`pixel_shuffle`): one class of the interleaved bundles of a step
+    /// (`iteration::BUNDLES_PER_STEP`).
     pub pixel_class: u32,
     /// 1 (every pixel gathers through the one bundle of a step) or 2 (four bundles a step).
     pub pixel_stride: u32,
-    pub _pad: [u32; 1],
+    /// The step's shuffle of the classes within each 2 x 2 block, the same for its four
+    /// bundles: block b's pixel at offset (pixel_class + hash(b, pixel_shuffle)) mod 4
+    /// gathers through bundle pixel_class, so that every pixel gathers once a step and no
+    /// fixed pattern of classes shows in the image.
+    pub pixel_shuffle: u32,
 }
 
 /// A vertex of the rasterised patch triangles: position and patch id (with
@@ -342,7 +346,7 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuWindowFace => "WindowFace" { view, tile }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
         layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
-        layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state, image_step, pixel_class, pixel_stride }),
+        layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state, image_step, pixel_class, pixel_stride, pixel_shuffle }),
     ]
 }
 

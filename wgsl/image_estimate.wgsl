@@ -695,6 +695,25 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
     return radiance;
 }
 
+// The pixel of block `block` (of pixel_stride x pixel_stride pixels) that gathers through
+// this bundle: the one at offset (pixel_class + h) mod 4 in the block (x first), h a hash of
+// the block and the step's pixel_shuffle. The four bundles of a step take the four offsets
+// of every block; which takes which changes from block to block and step to step, so that
+// the classes' errors, each smooth over the image, show as noise rather than as a fixed
+// 2 x 2 pattern.
+fn class_pixel(block: vec2<u32>) -> vec2<u32> {
+    let stride = bundle.pixel_stride;
+    if (stride == 1u) {
+        return block;
+    }
+    var h = (block.x * 0x8da6b343u) ^ (block.y * 0xd8163841u) ^ bundle.pixel_shuffle;
+    h = (h ^ (h >> 16u)) * 0x7feb352du;
+    h = (h ^ (h >> 15u)) * 0x846ca68bu;
+    h = h ^ (h >> 16u);
+    let offset = (bundle.pixel_class + (h >> 30u)) & 3u;
+    return block * 2u + vec2<u32>(offset & 1u, offset >> 1u);
+}
+
 // G: the indirect light gathered through this step's bundle, added to the second half of
 // the image sum (bound here as image_sum). A pixel whose patch has no fragment of its own
 // near x on x's line is listed in `edges` instead (edges[0] counts them, the host clears
@@ -702,17 +721,13 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
 @compute @workgroup_size(8, 8)
 fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = camera.size.xy;
-    // Only this bundle's pixels: (x, y) with x mod stride + stride (y mod stride) = class
-    // (with four bundles a step, each pixel of a 2 x 2 block gathers through its own); the
-    // host dispatches a grid a stride's square smaller.
-    let stride = bundle.pixel_stride;
-    let pixel_class = vec2<u32>(bundle.pixel_class % stride, bundle.pixel_class / stride);
-    let first_row = (pixel_class.y + stride - params.first_row % stride) % stride;
+    // Only this bundle's pixels, one of each stride x stride block of the image (with four
+    // bundles a step, each pixel of a 2 x 2 block gathers through its own): one invocation
+    // per block, the host dispatching the blocks that meet this band's rows.
+    let xy = class_pixel(vec2<u32>(gid.x, gid.y + params.first_row / bundle.pixel_stride));
     // This band's rows: its image_sum holds them alone, from params.first_row on.
-    let local = vec2<u32>(gid.x * stride + pixel_class.x, gid.y * stride + first_row);
-    let xy = vec2<u32>(local.x, local.y + params.first_row);
-    let pixel = local.y * size.x + local.x;
-    if (local.x >= size.x || xy.y >= size.y || pixel >= arrayLength(&image_sum)) {
+    let pixel = (xy.y - params.first_row) * size.x + xy.x;
+    if (xy.x >= size.x || xy.y >= size.y || xy.y < params.first_row || pixel >= arrayLength(&image_sum)) {
         return;
     }
     let at = seen(xy);

@@ -245,8 +245,10 @@ impl ImageEstimate {
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
         for band in &self.bands {
             encoder.clear_buffer(&band.edges, 0, Some(4));
+            // One invocation per block of stride x stride pixels that meets the band's rows.
             let stride = self.pixel_stride;
-            let groups = SPEC.grid("gather", [self.width.div_ceil(stride), band.rows.div_ceil(stride)]);
+            let block_rows = (band.first_row + band.rows).div_ceil(stride) - band.first_row / stride;
+            let groups = SPEC.grid("gather", [self.width.div_ceil(stride), block_rows]);
             let bind_groups = [&band.groups[1], &self.direct_group, &self.gather_group];
             kernel::dispatch(encoder, "firstshot.image_estimate.gather", &self.gather_pipeline, &bind_groups, groups);
             let edges = (crate::layout::EDGE_WORKGROUPS, 1);

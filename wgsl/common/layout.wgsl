@@ -138,8 +138,9 @@ struct Bundle {
     capacity: u32,
     use_state: u32,
     image_step: u32,      // 1 past the burn-in: this step's K joins diffuse_sum
-    pixel_class: u32,     // the gather's pixels: x mod stride + stride (y mod stride) = class
+    pixel_class: u32,     // the gather's pixels: one of each stride x stride block
     pixel_stride: u32,    // 1, or 2 with four interleaved bundles a step
+    pixel_shuffle: u32,   // the step's shuffle of the classes within the blocks
 }
 
 // Which way patch j looks along a bundle: +1 if its front faces +d, else -1 (s_j).
