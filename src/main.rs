@@ -716,12 +716,15 @@ impl Job<'_> {
             paths.write_stats(format!("{json}\n").as_bytes())?;
         }
         if stats.iterations > 0 && options.iterations > 0 {
+            let bundles = match stats.bundles_per_step {
+                1 => format!("one {r}x{r} bundle", r = stats.bundle_resolution),
+                n => format!("{n} interleaved {r}x{r} bundles", r = stats.bundle_resolution),
+            };
             self.say.say(format!(
-                "iteration: {} steps of {r}x{r} bundles, median {:.1} ms per step ({:.1} steps/s)",
+                "iteration: {} steps of {bundles}, median {:.1} ms per step ({:.1} steps/s)",
                 stats.iterations,
                 stats.iteration_ms_median,
                 1e3 / stats.iteration_ms_median.max(1e-9),
-                r = stats.bundle_resolution
             ));
         }
         let written: Vec<String> =
