@@ -38,19 +38,13 @@ pub struct BundleScene {
 pub const BUNDLES_PER_STEP: u32 = 4;
 
 /// The bundle counts a step may have: one, or four interleaved over 2 x 2 pixels.
-pub const BUNDLES_PER_STEP_CHOICES: [u32; 2] = [1, 4];
-const BUNDLES_PER_STEP_MAX: u32 = 4;
+pub const BUNDLES_PER_STEP_CHOICES: [u32; 2] = [1, BUNDLES_PER_STEP];
 
 /// Which of a step's bundles: `index` of `per_step` (1 or 4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StepBundle {
     pub index: u32,
     pub per_step: u32,
-}
-
-impl StepBundle {
-    /// The only bundle of a step that has one.
-    pub const ONLY: StepBundle = StepBundle { index: 0, per_step: 1 };
 }
 
 /// The pixel stride of the gather's classes for `per_step` bundles a step: 1 or 2.
@@ -146,10 +140,7 @@ pub const AUTO_BUNDLE_LINE_PIXELS: f64 = 1.5;
 /// bundled scenes peaked at 256 x 256 and 512 x 512 (docs/PERFORMANCE.md, "Bundle
 /// resolution").
 pub fn auto_bundle_resolution(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> u32 {
-    let needs = bundle_needs(patches, radius, views);
-    let wanted = needs.patches.max(needs.image);
-    let r = (wanted.min(AUTO_BUNDLE_MAX as f64).ceil() as u32).div_ceil(64) * 64;
-    r.clamp(AUTO_BUNDLE_MIN, AUTO_BUNDLE_MAX)
+    BundleNeeds::of(patches, radius, views).resolution()
 }
 
 /// The two needs of `auto_bundle_resolution`, before rounding: the resolution that gives the
@@ -171,53 +162,62 @@ pub struct BundleNeeds {
 /// less) four bundles of 352 took twice the time of a step for no lower error, where the
 /// Cornell box (image 256, patches 70 at 256 x 256) reached a third of the squared error in
 /// 1.5 times the time (docs/PERFORMANCE.md, "Four bundles a step").
-pub fn auto_bundles_per_step(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> u32 {
-    let needs = bundle_needs(patches, radius, views);
+pub fn auto_bundles_per_step(needs: &BundleNeeds) -> u32 {
     if needs.image >= 2.0 * needs.patches { BUNDLES_PER_STEP } else { 1 }
 }
 
-fn bundle_needs(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> BundleNeeds {
-    let sampled = patches.median_sample();
-    let mut areas: Vec<f64> = sampled.clone().map(|p| p.area).collect();
-    let by_patches = crate::scene::tessellate::median(&mut areas).map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
-    let mut wanted: f64 = 0.0;
-    for view in views {
-        let c = &view.camera;
-        let forward = (c.look_at - c.position).normalize_or_zero();
-        let right = forward.cross(c.up).normalize_or_zero();
-        let up = right.cross(forward);
-        let tan_y = (0.5 * c.fov_y.to_radians()).tan();
-        let tan_x = tan_y * c.width as f64 / c.height.max(1) as f64;
-        // (distance, solid angle) of each patch centre in the frustum.
-        let mut seen: Vec<(f64, f64)> = sampled
-            .clone()
-            .filter_map(|p| {
-                let v = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - c.position;
-                let z = v.dot(forward);
-                if z <= 0.0 || v.dot(right).abs() > tan_x * z || v.dot(up).abs() > tan_y * z {
-                    return None;
-                }
-                let d2 = v.length_squared();
-                let solid_angle = p.area * p.normal.dot(v).abs() / (d2 * d2.sqrt());
-                (solid_angle > 0.0).then(|| (d2.sqrt(), solid_angle))
-            })
-            .collect();
-        if seen.is_empty() || c.height == 0 {
-            continue;
-        }
-        seen.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let half: f64 = 0.5 * seen.iter().map(|s| s.1).sum::<f64>();
-        let mut acc = 0.0;
-        let distance = seen.iter().find(|s| {
-            acc += s.1;
-            acc >= half
-        });
-        if let Some(&(distance, _)) = distance {
-            let footprint = AUTO_BUNDLE_LINE_PIXELS * distance * 2.0 * tan_y / c.height as f64;
-            wanted = wanted.max(2.0 * radius / footprint);
-        }
+impl BundleNeeds {
+    /// `auto_bundle_resolution`'s choice for one bundle a step.
+    pub fn resolution(&self) -> u32 {
+        let wanted = self.patches.max(self.image);
+        let r = (wanted.min(AUTO_BUNDLE_MAX as f64).ceil() as u32).div_ceil(64) * 64;
+        r.clamp(AUTO_BUNDLE_MIN, AUTO_BUNDLE_MAX)
     }
-    BundleNeeds { patches: by_patches, image: wanted }
+
+    /// The needs of `patches` in a bounding sphere of `radius`, seen by `views`.
+    pub fn of(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> BundleNeeds {
+        let sampled = patches.median_sample();
+        let mut areas: Vec<f64> = sampled.clone().map(|p| p.area).collect();
+        let by_patches = crate::scene::tessellate::median(&mut areas).map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
+        let mut wanted: f64 = 0.0;
+        for view in views {
+            let c = &view.camera;
+            let forward = (c.look_at - c.position).normalize_or_zero();
+            let right = forward.cross(c.up).normalize_or_zero();
+            let up = right.cross(forward);
+            let tan_y = (0.5 * c.fov_y.to_radians()).tan();
+            let tan_x = tan_y * c.width as f64 / c.height.max(1) as f64;
+            // (distance, solid angle) of each patch centre in the frustum.
+            let mut seen: Vec<(f64, f64)> = sampled
+                .clone()
+                .filter_map(|p| {
+                    let v = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - c.position;
+                    let z = v.dot(forward);
+                    if z <= 0.0 || v.dot(right).abs() > tan_x * z || v.dot(up).abs() > tan_y * z {
+                        return None;
+                    }
+                    let d2 = v.length_squared();
+                    let solid_angle = p.area * p.normal.dot(v).abs() / (d2 * d2.sqrt());
+                    (solid_angle > 0.0).then(|| (d2.sqrt(), solid_angle))
+                })
+                .collect();
+            if seen.is_empty() || c.height == 0 {
+                continue;
+            }
+            seen.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let half: f64 = 0.5 * seen.iter().map(|s| s.1).sum::<f64>();
+            let mut acc = 0.0;
+            let distance = seen.iter().find(|s| {
+                acc += s.1;
+                acc >= half
+            });
+            if let Some(&(distance, _)) = distance {
+                let footprint = AUTO_BUNDLE_LINE_PIXELS * distance * 2.0 * tan_y / c.height as f64;
+                wanted = wanted.max(2.0 * radius / footprint);
+            }
+        }
+        BundleNeeds { patches: by_patches, image: wanted }
+    }
 }
 
 /// The last burn-in bundles (bounces) run at the full bundle resolution (`coarse_burn_in`).
@@ -371,7 +371,7 @@ impl Iteration {
         });
         let step_bundles = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("firstshot.iteration.step_bundles"),
-            size: BUNDLES_PER_STEP_MAX as u64 * std::mem::size_of::<GpuBundle>() as u64,
+            size: BUNDLES_PER_STEP as u64 * std::mem::size_of::<GpuBundle>() as u64,
             usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });

@@ -498,7 +498,7 @@ fn read_resume(
             path.display()
         )));
     }
-    let burn_in = firstshot::render::burn_in_steps(scene, patches, options);
+    let burn_in = firstshot::render::burn_in_steps(scene, options, options.bundles_per_step_for(scene, patches));
     let pixels: Vec<u64> =
         options.views(scene).iter().map(|v| v.camera.width as u64 * v.camera.height as u64).collect();
     checkpoint.check_numbers(

@@ -132,15 +132,14 @@ pub fn predict(
     let (lines, fragments) = match options.iterations {
         0 => (0, 0),
         _ => {
-            let resolution = options.bundle_resolution_for(scene, patches);
+            let (resolution, per_step) = options.bundles_for(scene, patches);
             let r = resolution as u64;
             let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
             let capacity = |resolution| initial_fragment_capacity(options, limits, patches, radius, resolution);
             // The coarse burn-in's lines and fragments live beside the full grid's while it runs.
-            let burn_in = crate::render::burn_in_steps(scene, patches, options);
-            let (coarse_lines, coarse_fragments) =
-                crate::iteration::coarse_burn_in(resolution, burn_in, options.bundles_per_step_for(scene, patches))
-                    .map_or((0, 0), |(c, _)| (c as u64 * c as u64, capacity(c)));
+            let burn_in = crate::render::burn_in_steps(scene, options, per_step);
+            let (coarse_lines, coarse_fragments) = crate::iteration::coarse_burn_in(resolution, burn_in, per_step)
+                .map_or((0, 0), |(c, _)| (c as u64 * c as u64, capacity(c)));
             (r * r + coarse_lines, capacity(resolution) + coarse_fragments)
         }
     };

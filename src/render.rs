@@ -134,20 +134,27 @@ impl RenderOptions {
     /// (each patch crossed as often), each line as wide against the pixels that gather
     /// through it (every other pixel in x and y).
     pub fn bundle_resolution_for(&self, scene: &Scene, patches: &Patches) -> u32 {
-        self.bundle_resolution.unwrap_or_else(|| {
-            let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
-            let one = crate::iteration::auto_bundle_resolution(patches, radius, &self.views(scene));
-            one / crate::iteration::pixel_stride(self.bundles_per_step_for(scene, patches))
-        })
+        self.bundles_for(scene, patches).0
     }
 
     /// The bundles a step of a render of `patches` draws: the number asked for, else the
     /// automatic choice for them and the views (`iteration::auto_bundles_per_step`).
     pub fn bundles_per_step_for(&self, scene: &Scene, patches: &Patches) -> u32 {
-        self.bundles_per_step.unwrap_or_else(|| {
-            let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
-            crate::iteration::auto_bundles_per_step(patches, radius, &self.views(scene))
-        })
+        self.bundles_for(scene, patches).1
+    }
+
+    /// (`bundle_resolution_for`, `bundles_per_step_for`), from one pass over the patches
+    /// (their bounding sphere and needs) where either is automatic.
+    pub fn bundles_for(&self, scene: &Scene, patches: &Patches) -> (u32, u32) {
+        if let (Some(resolution), Some(per_step)) = (self.bundle_resolution, self.bundles_per_step) {
+            return (resolution, per_step);
+        }
+        let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+        let needs = crate::iteration::BundleNeeds::of(patches, radius, &self.views(scene));
+        let per_step = self.bundles_per_step.unwrap_or_else(|| crate::iteration::auto_bundles_per_step(&needs));
+        let resolution =
+            self.bundle_resolution.unwrap_or_else(|| needs.resolution() / crate::iteration::pixel_stride(per_step));
+        (resolution, per_step)
     }
 
     /// The views of the render, in order: `cameras`, or the scene's camera at `width` x
@@ -298,13 +305,12 @@ impl Hooks for NoHooks {}
 
 /// Steps of the iteration before the first one averaged into the image: `--burn-in`, or
 /// the scene's default; none without an iteration.
-pub fn burn_in_steps(scene: &Scene, patches: &Patches, options: &RenderOptions) -> u32 {
+/// `bundles_per_step`: `RenderOptions::bundles_per_step_for`.
+pub fn burn_in_steps(scene: &Scene, options: &RenderOptions, bundles_per_step: u32) -> u32 {
     match options.iterations {
         0 => 0,
         // The default is in bounces; each of a step's bundles is one.
-        _ => options
-            .burn_in
-            .unwrap_or_else(|| default_burn_in(scene).div_ceil(options.bundles_per_step_for(scene, patches))),
+        _ => options.burn_in.unwrap_or_else(|| default_burn_in(scene).div_ceil(bundles_per_step.max(1))),
     }
 }
 
@@ -675,8 +681,7 @@ impl<'a> Renderer<'a> {
         // the number. The Renderer keeps the options as given, whose fingerprint a
         // checkpoint or shard carries (the choice follows from them and the scene).
         let given = options;
-        let bundle_resolution = options.bundle_resolution_for(scene, patches);
-        let per_step = options.bundles_per_step_for(scene, patches);
+        let (bundle_resolution, per_step) = options.bundles_for(scene, patches);
         let resolved = RenderOptions {
             bundle_resolution: Some(bundle_resolution),
             bundles_per_step: Some(per_step),
@@ -707,7 +712,7 @@ impl<'a> Renderer<'a> {
                 initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, bundle_resolution);
             Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity)?)
         };
-        let burn_in = burn_in_steps(scene, patches, options);
+        let burn_in = burn_in_steps(scene, options, per_step);
         let coarse = match (&iteration, crate::iteration::coarse_burn_in(bundle_resolution, burn_in, per_step)) {
             (Some(full), Some((resolution, steps))) => {
                 let capacity = initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, resolution);
@@ -895,12 +900,7 @@ impl<'a> Renderer<'a> {
 
     /// Every view's gather through the bundle last run (the pixels of its class).
     fn gather_stages(&self) -> Vec<Stage<'_>> {
-        let mut stages: Vec<Stage<'_>> = Vec::new();
-        for view in &self.views {
-            let estimate = &view.estimate;
-            stages.push(("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e))));
-        }
-        stages
+        self.views.iter().map(|view| gather_stage(&view.estimate)).collect()
     }
 
     /// The stages that add one estimate of every pixel of every view to its image sum: per
@@ -932,7 +932,7 @@ impl<'a> Renderer<'a> {
                 stages.push(("direct", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_direct(e))));
             }
             if gather {
-                stages.push(("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e))));
+                stages.push(gather_stage(estimate));
             }
         }
         stages
@@ -1310,6 +1310,11 @@ impl<'a> Renderer<'a> {
             interrupted,
         })
     }
+}
+
+/// A view's gather through the bundle last run (`ImageEstimate::record_gather`).
+fn gather_stage(estimate: &ImageEstimate) -> Stage<'_> {
+    ("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e)))
 }
 
 /// The passes of a direct-light image that ran, and whether a stop ended them early.

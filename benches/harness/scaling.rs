@@ -5,7 +5,7 @@
 //! up to 10 M patches) and the Cornell box at large images (`--images`, up to 8K), with the
 //! memory predicted and the process's peak.
 
-use crate::session::{IDLE, Session, own_time};
+use crate::session::{IDLE, Session, merge_repeated_stages, own_time};
 use crate::stats::{Summary, median, summary};
 use crate::svg::{Plot, Series};
 use crate::{Config, LoadedScene, Machine, Slot, guarded, print_table, scene_path, write_json, write_text};
@@ -86,12 +86,9 @@ fn measure(
         fragments.push(f as f64);
         let idle = times.iter().find(|t| t.name == IDLE).map_or(0.0, |t| t.wall_ms);
         // A stage that runs several times a step (one per bundle) counts with its sum.
-        let mut step: BTreeMap<String, f64> = BTreeMap::new();
-        for t in times.iter().filter(|t| t.name != IDLE) {
-            *step.entry(t.name.to_string()).or_default() += own_time(t.wall_ms, t.gpu_ms, idle).0;
-        }
-        for (name, ms) in step {
-            stage_times.entry(name).or_default().push(ms);
+        for (t, runs) in merge_repeated_stages(times).iter().filter(|(t, _)| t.name != IDLE) {
+            let ms = own_time(t.wall_ms, t.gpu_ms, *runs as f64 * idle).0;
+            stage_times.entry(t.name.to_string()).or_default().push(ms);
         }
     }
     Ok(Row {

@@ -224,3 +224,21 @@ pub fn copy_bandwidth(ctx: &Context) -> Result<f64> {
     }
     Ok(2.0 * BYTES as f64 / crate::stats::median(&times) / 1e9)
 }
+
+/// A step's stages with the same name added together, in the order of their first run, each
+/// with how many runs it adds: a step of four bundles runs the bundle stages and the gather
+/// four times, a step of several views the image stages once per view.
+pub fn merge_repeated_stages(times: Vec<StageTime>) -> Vec<(StageTime, u32)> {
+    let mut merged: Vec<(StageTime, u32)> = Vec::new();
+    for t in times {
+        match merged.iter_mut().find(|(m, _)| m.name == t.name) {
+            Some((m, runs)) => {
+                m.wall_ms += t.wall_ms;
+                m.gpu_ms = m.gpu_ms.zip(t.gpu_ms).map(|(a, b)| a + b);
+                *runs += 1;
+            }
+            None => merged.push((t, 1)),
+        }
+    }
+    merged
+}

@@ -2,10 +2,10 @@
 //! product's `render` (warm-up first, then repeats), the fragments of a step, each stage's
 //! time, the bytes it moves against the adapter's copy rate, and ratios between adapters.
 
-use crate::session::{IDLE, Session, copy_bandwidth, own_time, stage_bytes};
+use crate::session::{IDLE, Session, copy_bandwidth, merge_repeated_stages, own_time, stage_bytes};
 use crate::stats::{Summary, summary};
 use crate::{Config, LoadedScene, Machine, Slot, guarded, load_scene, print_table, spread, write_json};
-use firstshot::gpu::profile::{StageTime, StageTimer};
+use firstshot::gpu::profile::StageTimer;
 use firstshot::render::render;
 use serde::Serialize;
 
@@ -339,22 +339,4 @@ fn print_summary(cases: &[Case]) {
             m.stage_wall_sum_ms, m.stage_sum_ms
         );
     }
-}
-
-/// A step's stages with the same name added together, in the order of their first run, each
-/// with how many runs it adds: a step of four bundles runs the bundle stages and the gather
-/// four times, a step of several views the image stages once per view.
-fn merge_repeated_stages(times: Vec<StageTime>) -> Vec<(StageTime, u32)> {
-    let mut merged: Vec<(StageTime, u32)> = Vec::new();
-    for t in times {
-        match merged.iter_mut().find(|(m, _)| m.name == t.name) {
-            Some((m, runs)) => {
-                m.wall_ms += t.wall_ms;
-                m.gpu_ms = m.gpu_ms.zip(t.gpu_ms).map(|(a, b)| a + b);
-                *runs += 1;
-            }
-            None => merged.push((t, 1)),
-        }
-    }
-    merged
 }
