@@ -128,7 +128,7 @@ pub(crate) struct RenderArgs {
     /// 1). With 4, each pixel of a 2 x 2 block gathers through its own bundle, so that
     /// neighbouring pixels' errors are independent; the automatic --bundle-resolution is
     /// halved for them (as many lines a step).
-    #[arg(long, value_name = "N|auto", value_parser = parse_bundles_per_step)]
+    #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = parse_bundles_per_step)]
     bundles_per_step: Option<BundlesPerStep>,
     /// The camera to render, by name: "camera" for the [camera] table, or a [[cameras]]
     /// entry's name (default: the first of the scene's cameras).
