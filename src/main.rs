@@ -99,7 +99,8 @@ pub(crate) struct RenderArgs {
     // message, instead of clap's "unexpected argument '-1'".
     #[arg(long, value_name = "X", allow_negative_numbers = true)]
     patch_size: Option<f64>,
-    /// Pixels along a full cube-face edge of the first shot's item buffers.
+    /// Pixels along a full cube-face edge of the first shot's item buffers (default: from
+    /// the patches the light samples see, `first_shot::auto_resolution`).
     #[arg(long, value_name = "R")]
     hemicube_resolution: Option<u32>,
     /// The window around area-light samples: hemicube | tetrahedron.
@@ -442,7 +443,7 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     }
     options.width = args.width.unwrap_or(options.width);
     options.height = args.height.unwrap_or(options.height);
-    options.hemicube_resolution = args.hemicube_resolution.unwrap_or(options.hemicube_resolution);
+    options.hemicube_resolution = args.hemicube_resolution.or(options.hemicube_resolution);
     if let Some(r) = args.bundle_resolution {
         options.bundle_resolution = r.0;
     }
@@ -681,7 +682,7 @@ impl Job<'_> {
                 rendered.stats.first_shot_faces,
                 rendered.stats.first_shot_pairs,
                 rendered.stats.first_shot_ms,
-                r = self.options.hemicube_resolution
+                r = rendered.stats.hemicube_resolution
             ));
         }
         rendered.stats.tessellation_ms = self.tessellation_ms;

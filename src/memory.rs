@@ -151,7 +151,10 @@ pub fn predict(
         false => 0,
     };
     let hemicube = match options.first_shot {
-        true => options.hemicube_resolution as u64 * options.hemicube_resolution as u64 * 8,
+        true => {
+            let r = options.hemicube_resolution_for(patches) as u64;
+            r * r * 8
+        }
         false => 0,
     };
     // The lights' windows: six faces a light at most (a hemicube's five, packed), a sun's

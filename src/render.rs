@@ -54,8 +54,9 @@ pub struct RenderOptions {
     pub patch_size: f64,
     pub iterations: u32,
     pub seed: u64,
-    /// Pixels along a full cube-face edge of the first shot's item buffers.
-    pub hemicube_resolution: u32,
+    /// Pixels along a full cube-face edge of the first shot's item buffers; `None`: chosen
+    /// from the patches the light samples see (`first_shot::auto_resolution`).
+    pub hemicube_resolution: Option<u32>,
     pub light_window: LightWindow,
     /// Pixels along each edge of a bundle's parallel projection; `None`: chosen from the
     /// patches and the views (`iteration::auto_bundle_resolution`).
@@ -126,6 +127,12 @@ impl RenderOptions {
             cameras: Vec::new(),
             bundles_per_step: scene.settings.bundles_per_step,
         }
+    }
+
+    /// The first shot's hemicube resolution for `patches`: the one asked for, else the
+    /// automatic choice (`first_shot::auto_resolution`).
+    pub fn hemicube_resolution_for(&self, patches: &Patches) -> u32 {
+        self.hemicube_resolution.unwrap_or_else(|| crate::first_shot::auto_resolution(patches))
     }
 
     /// The bundle resolution of a render of `patches`: the one asked for, else the automatic
@@ -446,10 +453,13 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
     // The stages check these too, but only once the first shot (or the first shot and the
     // bundle buffers) exist: here they are refused before any GPU work, and the bundle's
     // line table, which no stage checked, cannot reach wgpu as a validation panic.
-    if options.first_shot && options.hemicube_resolution > max_dim {
+    // The automatic choice stays within first_shot::AUTO_RESOLUTION_MAX, which every
+    // device's textures allow.
+    if let (true, Some(r)) = (options.first_shot, options.hemicube_resolution)
+        && r > max_dim
+    {
         return Err(Error::Limits(format!(
-            "--hemicube-resolution {} exceeds the device's largest texture side {max_dim}; use a smaller --hemicube-resolution",
-            options.hemicube_resolution
+            "--hemicube-resolution {r} exceeds the device's largest texture side {max_dim}; use a smaller --hemicube-resolution"
         )));
     }
     if options.iterations > 0 {
@@ -633,6 +643,8 @@ pub struct Renderer<'a> {
     scene: &'a Scene,
     /// As given (`bundle_resolution` may be `None`: automatic).
     options: RenderOptions,
+    /// The first shot's hemicube resolution in use (`RenderOptions::hemicube_resolution_for`).
+    hemicube_resolution: u32,
     /// The bundle resolution in use (`RenderOptions::bundle_resolution_for`).
     bundle_resolution: u32,
     /// The bundles a step draws (`RenderOptions::bundles_per_step_for`).
@@ -677,12 +689,14 @@ impl<'a> Renderer<'a> {
         hooks: &mut dyn Hooks,
     ) -> Result<Self> {
         let start = Instant::now();
-        // The automatic bundle resolution, chosen once: the checks and the memory plan see
-        // the number. The Renderer keeps the options as given, whose fingerprint a
+        // The automatic bundle and hemicube resolutions, chosen once: the checks and the
+        // memory plan see the numbers. The Renderer keeps the options as given, whose fingerprint a
         // checkpoint or shard carries (the choice follows from them and the scene).
         let given = options;
         let (bundle_resolution, per_step) = options.bundles_for(scene, patches);
+        let hemicube_resolution = options.hemicube_resolution_for(patches);
         let resolved = RenderOptions {
+            hemicube_resolution: Some(hemicube_resolution),
             bundle_resolution: Some(bundle_resolution),
             bundles_per_step: Some(per_step),
             ..options.clone()
@@ -700,7 +714,7 @@ impl<'a> Renderer<'a> {
         let first_shot = if !options.first_shot || patches.samples.is_empty() {
             None
         } else {
-            let stats = first_shot::run(ctx, &mut buffers, patches, options.hemicube_resolution, options.light_window)?;
+            let stats = first_shot::run(ctx, &mut buffers, patches, hemicube_resolution, options.light_window)?;
             hooks.phase("first shot", stats.ms);
             Some(stats)
         };
@@ -743,6 +757,7 @@ impl<'a> Renderer<'a> {
             ctx,
             scene,
             options: given.clone(),
+            hemicube_resolution,
             bundle_resolution,
             per_step,
             near: buffers.radius * 1e-5,
@@ -1090,7 +1105,7 @@ impl<'a> Renderer<'a> {
                 patch_size: o.patch_size,
                 camera_samples,
                 first_shot: fs.is_some(),
-                hemicube_resolution: o.hemicube_resolution,
+                hemicube_resolution: self.hemicube_resolution,
                 light_window: o.light_window,
                 first_shot_pairs: fs.map_or(0, |f| f.pairs),
                 first_shot_faces: fs.map_or(0, |f| f.faces),

@@ -158,3 +158,62 @@ fn test04_partly_shadowed_receiver_matches_a_cpu_ray_caster() {
     }
     assert!(checked >= 2, "the occluder must put some patches in partial shadow, got {checked}");
 }
+
+#[test]
+fn test05_automatic_resolution_makes_the_median_patch_its_pixels_across() {
+    use firstshot::first_shot::{AUTO_RESOLUTION_MAX, AUTO_RESOLUTION_MIN, PIXELS_PER_PATCH, auto_resolution};
+    use firstshot::scene::SampleKind;
+    // A quad of side 2 at y = 0, cut into two triangles of area 2, and a light straight
+    // above its centre at height h: each triangle's centroid lies at (1/3, 0, -1/3) or
+    // (-1/3, 0, 1/3), so q = sqrt(h^2 + 2/9) / sqrt(2) for both, and a face of R pixels
+    // shows a patch R / (2 q) pixels across: R = 2 * 1.5 * q, up to a multiple of 16.
+    let quad = |s: f64| {
+        [
+            [DVec3::new(-1.0, 0.0, -1.0), DVec3::new(-1.0, 0.0, 1.0), DVec3::new(1.0, 0.0, 1.0)],
+            [DVec3::new(-1.0, 0.0, -1.0), DVec3::new(1.0, 0.0, 1.0), DVec3::new(1.0, 0.0, -1.0)],
+        ]
+        .map(|t| t.map(|v| v * s))
+    };
+    let at = |h: f64, s: f64| auto_resolution(&patches_of(&quad(s), vec![point_sample(DVec3::new(0.0, h, 0.0) * s)]));
+    assert_eq!(PIXELS_PER_PATCH, 1.5, "the figures below are for 1.5 pixels");
+    // h = 100: q = 70.712, 2 * 1.5 * q = 212.1 -> 224.
+    assert_eq!(at(100.0, 1.0), 224);
+    // Only the ratio of distance to patch size counts: the same scene 7 times larger.
+    assert_eq!(at(100.0, 7.0), 224);
+    // Twice as far: q = 141.42, 424.3 -> 432.
+    assert_eq!(at(200.0, 1.0), 432);
+    // Near (q = 7.08, 21.2) and far (q = 707, 2121): the bounds.
+    assert_eq!(at(10.0, 1.0), AUTO_RESOLUTION_MIN);
+    assert_eq!(at(1000.0, 1.0), AUTO_RESOLUTION_MAX);
+    // The sample that needs most sets it: the far light of the two.
+    let both = vec![point_sample(DVec3::new(0.0, 100.0, 0.0)), point_sample(DVec3::new(0.0, 200.0, 0.0))];
+    assert_eq!(auto_resolution(&patches_of(&quad(1.0), both)), 432);
+    // An area-light sample counts only the patches in front of it: facing up, away from
+    // the quad, it sees none and asks for the least; facing down, as the point light.
+    let area = |normal: DVec3| {
+        let mut s = point_sample(DVec3::new(0.0, 100.0, 0.0));
+        s.kind = SampleKind::AreaVertex { normal };
+        auto_resolution(&patches_of(&quad(1.0), vec![s]))
+    };
+    assert_eq!(area(DVec3::Y), AUTO_RESOLUTION_MIN);
+    assert_eq!(area(-DVec3::Y), 224);
+}
+
+#[test]
+fn test06_a_render_without_a_hemicube_resolution_takes_the_automatic_one() {
+    use firstshot::render::{RenderOptions, render};
+    let Some(ctx) = gpu() else { return };
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.toml");
+    let scene = firstshot::scene::load(&path).unwrap();
+    assert_eq!(scene.settings.hemicube_resolution, None, "the Cornell box leaves it to the rule");
+    let mut options = RenderOptions::from_scene(&scene);
+    (options.iterations, options.width, options.height, options.direct_passes) = (0, 16, 16, 1);
+    let patches = firstshot::scene::tessellate(&scene, options.patch_size).unwrap();
+    let auto = firstshot::first_shot::auto_resolution(&patches);
+    assert!(auto.is_multiple_of(16) && (64..=1024).contains(&auto), "{auto}");
+    let stats = render(&ctx, &scene, &patches, &options).unwrap().stats;
+    assert_eq!(stats.hemicube_resolution, auto);
+    // Asked for, it is taken as given.
+    options.hemicube_resolution = Some(48);
+    assert_eq!(render(&ctx, &scene, &patches, &options).unwrap().stats.hemicube_resolution, 48);
+}

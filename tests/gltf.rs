@@ -185,7 +185,7 @@ fn test02_a_gltf_box_renders_bit_identically_to_the_same_box_in_toml() {
         let mut options = RenderOptions::from_scene(s);
         (options.width, options.height) = (24, 24);
         options.iterations = 8;
-        options.hemicube_resolution = 64;
+        options.hemicube_resolution = Some(64);
         options.bundle_resolution = Some(48);
         options.patch_size = 2.0;
         let patches = scene::tessellate(s, options.patch_size).unwrap();
@@ -394,7 +394,7 @@ fn test06_a_real_world_gltf_loads_and_renders() {
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (48, 36);
     options.iterations = 4;
-    options.hemicube_resolution = 64;
+    options.hemicube_resolution = Some(64);
     options.bundle_resolution = Some(64);
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let image = render(&ctx, &scene, &patches, &options).unwrap().image;

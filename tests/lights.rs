@@ -510,7 +510,7 @@ fn test09_sun_room_renders_with_its_sunlit_patch() {
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (64, 48);
     (options.iterations, options.direct_passes, options.burn_in) = (8, 4, Some(2));
-    (options.hemicube_resolution, options.bundle_resolution, options.shadow_resolution) = (128, Some(64), Some(256));
+    (options.hemicube_resolution, options.bundle_resolution, options.shadow_resolution) = (Some(128), Some(64), Some(256));
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let image = render(&ctx, &scene, &patches, &options).unwrap().image;
     // Finite; not necessarily >= 0 after 8 steps: the control variate's K_j can be negative
@@ -642,7 +642,7 @@ fn test10_sunlit_glossy_square_lights_a_receiver_through_the_iteration() {
     let runs: Vec<f64> = (0..8)
         .map(|seed| {
             let mut o = RenderOptions::from_scene(&scene);
-            (o.iterations, o.seed, o.bundle_resolution, o.hemicube_resolution) = (250, 100 + seed, Some(48), 256);
+            (o.iterations, o.seed, o.bundle_resolution, o.hemicube_resolution) = (250, 100 + seed, Some(48), Some(256));
             let image = render(&ctx, &scene, &patches, &o).unwrap().image;
             let centre: Vec<f64> =
                 (6..10).flat_map(|y| (6..10).map(move |x| (x, y))).map(|(x, y)| image.at(x, y)[0] as f64).collect();

@@ -17,7 +17,7 @@ fn cornell_box() -> (Patches, RenderOptions) {
     options.width = 32;
     options.height = 32;
     options.bundle_resolution = Some(64);
-    options.hemicube_resolution = 64;
+    options.hemicube_resolution = Some(64);
     let patches = scene::tessellate(&scene, options.patch_size).expect("tessellates");
     (patches, options)
 }
@@ -147,7 +147,7 @@ fn test04_hand_made_patches() {
 #[test]
 fn test05_an_image_wider_or_taller_than_a_texture_is_refused() {
     let (patches, options) = cornell_box();
-    let options = RenderOptions { hemicube_resolution: 32, bundle_resolution: Some(32), ..options };
+    let options = RenderOptions { hemicube_resolution: Some(32), bundle_resolution: Some(32), ..options };
     let limits = wgpu::Limits { max_texture_dimension_2d: 32, ..defaults() };
     check_limits(&limits, &patches, &options).expect("32 x 32 fits a texture side of 32");
     for (width, height) in [(33, 32), (32, 33), (1000, 1)] {
@@ -181,7 +181,7 @@ fn test06_hemicube_and_bundle_resolutions_beyond_the_device() {
     let limits = wgpu::Limits { max_texture_dimension_2d: 64, ..defaults() };
     check_limits(&limits, &patches, &options).expect("64 fits a texture side of 64");
 
-    let hemicube = RenderOptions { hemicube_resolution: 65, ..options.clone() };
+    let hemicube = RenderOptions { hemicube_resolution: Some(65), ..options.clone() };
     refused(check_limits(&limits, &patches, &hemicube), &["--hemicube-resolution 65", "64"]);
     // Without the first shot no hemicube is rendered.
     check_limits(&limits, &patches, &RenderOptions { first_shot: false, ..hemicube }).expect("no first shot");

@@ -250,7 +250,7 @@ fn test04_no_start_up_bias() {
     let scene = scene::load(&common::scenes::shipped("cornell_box")).unwrap();
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (48, 48);
-    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, 128, Some(128));
+    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, Some(128), Some(128));
     options.bundle_resolution = Some(128);
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let below_light = |image: &Image| -> f64 {
@@ -330,7 +330,7 @@ fn test07_an_image_sum_in_bands_of_rows_is_the_same_bits() {
     let scene = scene::load(&common::scenes::shipped("cornell_box")).unwrap();
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (40, 30);
-    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, 64, Some(64));
+    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, Some(64), Some(64));
     (options.bundle_resolution, options.iterations, options.burn_in) = (Some(64), 12, Some(2));
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let whole = render(&ctx, &scene, &patches, &options).unwrap();
@@ -397,7 +397,7 @@ fn test08_a_finely_tessellated_occluder_does_not_leak_light() {
         let leaks = umbra.iter().filter(|&&(px, py)| rendered.image.at(px, py)[0] as f64 > 1e-3 * lit).count();
         (leaks, rendered.stats.shadow_resolution)
     };
-    let (before, r_before) = leaked(Some(scene.settings.hemicube_resolution / 2));
+    let (before, r_before) = leaked(scene.settings.hemicube_resolution.map(|r| r / 2));
     let (after, r_after) = leaked(None);
     eprintln!(
         "{} umbra pixels; lit by leaks: {before} at shadow resolution {r_before}, {after} at {r_after} (automatic)",

@@ -44,7 +44,7 @@ fn test01_paged_per_patch_arrays_give_the_same_bits() {
     let scene = scene::load(&common::scenes::shipped("cornell_box")).unwrap();
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (40, 30);
-    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (60.0, 64, Some(64));
+    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (60.0, Some(64), Some(64));
     (options.bundle_resolution, options.iterations, options.burn_in) = (Some(64), 12, Some(2));
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let n = patches.patches.len() as u64;
@@ -100,7 +100,7 @@ fn test02_a_paged_first_shot_pair_list_gives_the_same_bits() {
     let scene = scene::load(&common::scenes::shipped("cornell_box")).unwrap();
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (24, 24);
-    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (60.0, 64, Some(64));
+    (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (60.0, Some(64), Some(64));
     (options.bundle_resolution, options.iterations, options.burn_in) = (Some(64), 4, Some(1));
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let (whole, whole_state) = run(&ctx, &scene, &patches, &options);

@@ -60,7 +60,7 @@ fn test01_cornell_box_loads() {
         scene.settings,
         Settings {
             patch_size: 40.0,
-            hemicube_resolution: 512,
+            hemicube_resolution: None,
             bundle_resolution: None,
             iterations: 1000,
             seed: 1,

@@ -84,7 +84,7 @@ fn test03_with_and_without_first_shot_converge_to_the_same_image() {
     let run = |first_shot: bool, iterations: u32| {
         let mut o = RenderOptions::from_scene(&scene);
         (o.width, o.height) = (64, 64);
-        o.hemicube_resolution = 128;
+        o.hemicube_resolution = Some(128);
         o.bundle_resolution = Some(128);
         o.patch_size = 80.0;
         o.first_shot = first_shot;

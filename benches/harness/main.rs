@@ -173,7 +173,7 @@ impl Config {
     pub fn options(&self, scene: &Scene) -> RenderOptions {
         let mut o = RenderOptions::from_scene(scene);
         if self.quick {
-            (o.width, o.height, o.hemicube_resolution, o.bundle_resolution) = (128, 128, 128, Some(128));
+            (o.width, o.height, o.hemicube_resolution, o.bundle_resolution) = (128, 128, Some(128), Some(128));
         }
         if let Some(r) = self.bundle_resolution {
             o.bundle_resolution = Some(r);

@@ -84,7 +84,8 @@ impl Scene {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Settings {
     pub patch_size: f64,
-    pub hemicube_resolution: u32,
+    /// `None`: chosen from the patches the light samples see (`first_shot::auto_resolution`).
+    pub hemicube_resolution: Option<u32>,
     /// `None`: chosen from the patches and the image (`iteration::auto_bundle_resolution`).
     pub bundle_resolution: Option<u32>,
     pub iterations: u32,
@@ -98,7 +99,7 @@ impl Default for Settings {
     fn default() -> Self {
         Settings {
             patch_size: f64::INFINITY,
-            hemicube_resolution: 256,
+            hemicube_resolution: None,
             bundle_resolution: None,
             iterations: 100,
             seed: 1,
