@@ -119,7 +119,9 @@ pub struct DirectLights {
 /// The face side asked of the lights' windows: `options.shadow_resolution`, else
 /// `auto_resolution` (before the atlas budget, which may halve it).
 pub fn shadow_resolution(scene: &Scene, patches: &Patches, options: &RenderOptions) -> u32 {
-    options.shadow_resolution.unwrap_or_else(|| auto_resolution(scene, patches, options.hemicube_resolution_for(patches)))
+    options
+        .shadow_resolution
+        .unwrap_or_else(|| auto_resolution(scene, patches, options.hemicube_resolution_for(patches)))
 }
 
 /// The face side of the per-pixel direct light's windows when none is asked for: at least
@@ -339,7 +341,9 @@ impl DirectLights {
                     Source::Area { shared: true, .. } | Source::Directional { .. } => None,
                 };
                 match per_face {
-                    Some(lit) => auto_face_sides(*position, &forwards, lit, patches, options.hemicube_resolution_for(patches)),
+                    Some(lit) => {
+                        auto_face_sides(*position, &forwards, lit, patches, options.hemicube_resolution_for(patches))
+                    }
                     None => vec![resolution; forwards.len()],
                 }
             })

@@ -510,7 +510,8 @@ fn test09_sun_room_renders_with_its_sunlit_patch() {
     let mut options = RenderOptions::from_scene(&scene);
     (options.width, options.height) = (64, 48);
     (options.iterations, options.direct_passes, options.burn_in) = (8, 4, Some(2));
-    (options.hemicube_resolution, options.bundle_resolution, options.shadow_resolution) = (Some(128), Some(64), Some(256));
+    (options.hemicube_resolution, options.bundle_resolution, options.shadow_resolution) =
+        (Some(128), Some(64), Some(256));
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let image = render(&ctx, &scene, &patches, &options).unwrap().image;
     // Finite; not necessarily >= 0 after 8 steps: the control variate's K_j can be negative
