@@ -10,7 +10,7 @@
 #          whole tree stays under the 64 MiB a call may carry
 #   .gpu/  stripped, gzipped release builds of `firstshot` and the harness
 #
-# Usage (repository root):  tools/gpu/prepare.sh
+# Usage (repository root):  [FIRSTSHOT_SIERPINSKI_REFERENCE=ref.exr] tools/gpu/prepare.sh
 # Then the study runs in one call of the device tool, carrying .gl, .whl and .gpu:
 #   bash tools/gpu/run.sh            (docs/PERFORMANCE.md, "On a GPU")
 set -euo pipefail
@@ -54,5 +54,14 @@ rm -rf .gpu && mkdir -p .gpu
 strip -o .gpu/firstshot target/release/firstshot
 strip -o .gpu/harness "$harness"
 gzip -9 .gpu/firstshot .gpu/harness
+# The builds find the repository (refs/, tools/, scenes/) by the path they were built in:
+# run.sh makes that path lead to the repository there.
+realpath . >.gpu/manifest_dir
+# The Sierpinski scene's reference (refs/ holds only the Cornell boxes'): a long Mitsuba render
+# at 256 x 256, e.g. the peers study's own (`peers_reference_sierpinski_*.exr` in its --out).
+# Without one, the study on the GPU renders its own with cuda_ad_rgb.
+if [ -n "${FIRSTSHOT_SIERPINSKI_REFERENCE:-}" ]; then
+    cp "$FIRSTSHOT_SIERPINSKI_REFERENCE" .gpu/sierpinski.full.exr
+fi
 du -sh .gl .whl .gpu
 echo "tracked files: $(git ls-files -z | xargs -0 du -cb | tail -1 | cut -f1) bytes"

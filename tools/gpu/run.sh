@@ -100,7 +100,7 @@ for s in cornell_box cornell_point sierpinski; do
     [ $mitsuba_ok = 1 ] || break
     # refs/ holds the Cornell boxes' references; Sierpinski's comes with .gpu (a lone
     # --reference would be taken for any single scene).
-    ref=(); [ $s = sierpinski ] && ref=(--reference .gpu/sierpinski.full.exr)
+    ref=(); [ $s = sierpinski ] && [ -f .gpu/sierpinski.full.exr ] && ref=(--reference .gpu/sierpinski.full.exr)
     stage "peers_$s" 110 $harness peers --adapters $vk --scenes $s "${ref[@]}" \
         --peer-steps $steps --peer-spp $spp --out "$work/peers_$s"
 done
