@@ -292,7 +292,9 @@ const AUTO_SAMPLES: usize = 64;
 /// `direct_light::SUN_VIEW_SCALE` R pixels: sqrt(A) S R / (2 r) pixels, the same rule with
 /// q = r / (S sqrt(A)).
 pub fn auto_resolution(patches: &Patches) -> u32 {
-    let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+    // The bounding sphere is a pass over every patch: only a sun needs it.
+    let suns = patches.samples.iter().any(|s| matches!(s.kind, SampleKind::Directional { .. }));
+    let radius = if suns { crate::gpu::scene_buffers::bounding_sphere(patches).1 } else { 0.0 };
     let step = patches.samples.len().div_ceil(AUTO_SAMPLES).max(1);
     let mut q = Vec::new();
     let mut worst = 0.0f64;

@@ -197,6 +197,14 @@ fn test05_automatic_resolution_makes_the_median_patch_its_pixels_across() {
     };
     assert_eq!(area(DVec3::Y), AUTO_RESOLUTION_MIN);
     assert_eq!(area(-DVec3::Y), 224);
+    // A sun's parallel view of 4 R pixels spans the bounding sphere's diameter, 2 sqrt(2)
+    // here (the quad's corners): a triangle of the quad cut into 256^2, area 2 / 65536,
+    // is sqrt(2) / 256 across, 4 R / (2 sqrt(2)) * sqrt(2) / 256 = R / 128 pixels: 1.5
+    // pixels at R = 192.
+    let fine: Vec<[DVec3; 3]> = quad(1.0).iter().flat_map(|&t| split(t, 256)).collect();
+    let mut sun = point_sample(DVec3::ZERO);
+    sun.kind = SampleKind::Directional { direction: -DVec3::Y };
+    assert_eq!(auto_resolution(&patches_of(&fine, vec![sun])), 192);
 }
 
 #[test]
