@@ -89,8 +89,8 @@ pub(crate) struct RenderArgs {
     no_first_shot: bool,
     /// Pixels along an edge of each parallel projection of the iteration, or "auto": from
     /// the patch sizes and the image (the default unless the scene's [settings] set one).
-    #[arg(long, value_name = "R|auto", value_parser = parse_bundle_resolution, allow_negative_numbers = true)]
-    bundle_resolution: Option<BundleResolution>,
+    #[arg(long, value_name = "R|auto", value_parser = parse_resolution, allow_negative_numbers = true)]
+    bundle_resolution: Option<Resolution>,
     /// Random seed; the same seed, scene and flags give the same image.
     #[arg(long, value_name = "N")]
     seed: Option<u64>,
@@ -99,10 +99,10 @@ pub(crate) struct RenderArgs {
     // message, instead of clap's "unexpected argument '-1'".
     #[arg(long, value_name = "X", allow_negative_numbers = true)]
     patch_size: Option<f64>,
-    /// Pixels along a full cube-face edge of the first shot's item buffers (default: from
-    /// the patches the light samples see, `first_shot::auto_resolution`).
-    #[arg(long, value_name = "R")]
-    hemicube_resolution: Option<u32>,
+    /// Pixels along a full cube-face edge of the first shot's item buffers, or "auto": from
+    /// the patches the light samples see (the default unless the scene's [settings] set one).
+    #[arg(long, value_name = "R|auto", value_parser = parse_resolution, allow_negative_numbers = true)]
+    hemicube_resolution: Option<Resolution>,
     /// The window around area-light samples: hemicube | tetrahedron.
     #[arg(long, value_name = "W")]
     light_window: Option<LightWindow>,
@@ -431,7 +431,7 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     for (flag, v) in [
         ("--width", args.width),
         ("--height", args.height),
-        ("--hemicube-resolution", args.hemicube_resolution),
+        ("--hemicube-resolution", args.hemicube_resolution.and_then(|r| r.0)),
         ("--bundle-resolution", args.bundle_resolution.and_then(|r| r.0)),
         ("--shadow-resolution", args.shadow_resolution),
     ] {
@@ -443,7 +443,9 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     }
     options.width = args.width.unwrap_or(options.width);
     options.height = args.height.unwrap_or(options.height);
-    options.hemicube_resolution = args.hemicube_resolution.or(options.hemicube_resolution);
+    if let Some(r) = args.hemicube_resolution {
+        options.hemicube_resolution = r.0;
+    }
     if let Some(r) = args.bundle_resolution {
         options.bundle_resolution = r.0;
     }
@@ -761,16 +763,16 @@ impl Job<'_> {
     }
 }
 
-/// `--bundle-resolution`: a number of pixels, or "auto" (`None`).
+/// `--bundle-resolution`, `--hemicube-resolution`: a number of pixels, or "auto" (`None`).
 #[derive(Debug, Clone, Copy)]
-struct BundleResolution(Option<u32>);
+struct Resolution(Option<u32>);
 
-fn parse_bundle_resolution(value: &str) -> std::result::Result<BundleResolution, String> {
+fn parse_resolution(value: &str) -> std::result::Result<Resolution, String> {
     match value {
-        "auto" => Ok(BundleResolution(None)),
+        "auto" => Ok(Resolution(None)),
         _ => value
             .parse()
-            .map(|r| BundleResolution(Some(r)))
+            .map(|r| Resolution(Some(r)))
             .map_err(|_| format!("expected a number of pixels or \"auto\", got {value:?}")),
     }
 }

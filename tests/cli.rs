@@ -117,6 +117,8 @@ fn test02_usage_errors_exit_2_and_write_nothing() {
         (vec!["--bundle-resolution", "0"], "--bundle-resolution 0: expected 1 to 16384"),
         (vec!["--bundle-resolution", "-5"], "expected a number of pixels or \"auto\", got \"-5\""),
         (vec!["--bundle-resolution", "fine"], "expected a number of pixels or \"auto\""),
+        (vec!["--hemicube-resolution", "0"], "--hemicube-resolution 0: expected 1 to 16384"),
+        (vec!["--hemicube-resolution", "fine"], "expected a number of pixels or \"auto\""),
         (vec!["--camera", "side"], "--camera side: the scene has no camera \"side\"; its cameras are \"camera\""),
     ] {
         let err = refused_render(&scratch, &[&[cb.as_str()], &args[..]].concat(), "x.exr");
@@ -331,4 +333,34 @@ fn test07_bundle_resolution_beyond_the_buffers_is_a_limits_error() {
     let args = [path.as_str(), "--iterations", "1", "--bundle-resolution", "16384", "--quiet"];
     let err = refused_render(&scratch, &args, "x.exr");
     assert!(err.contains("--bundle-resolution"), "{err}");
+}
+
+/// `--hemicube-resolution auto` overrides a scene's fixed resolution with the automatic
+/// choice (`first_shot::auto_resolution`), which `--stats` reports; without the flag the
+/// scene's own stands.
+#[test]
+fn test08_hemicube_resolution_auto_overrides_the_scene() {
+    let scratch = Scratch::new("cli", "hemicube_auto");
+    let text = std::fs::read_to_string(cornell_box()).unwrap();
+    assert!(!text.contains("hemicube_resolution"), "the shipped Cornell box leaves it to the rule");
+    let scene = scratch.join("fixed.toml");
+    std::fs::write(&scene, text.replacen("[settings]", "[settings]\nhemicube_resolution = 512", 1)).unwrap();
+    let loaded = firstshot::scene::load(&scene).unwrap();
+    assert_eq!(loaded.settings.hemicube_resolution, Some(512));
+    let patches = firstshot::scene::tessellate(&loaded, loaded.settings.patch_size).unwrap();
+    let auto = firstshot::first_shot::auto_resolution(&patches);
+    assert_ne!(auto, 512);
+    let (stats, out) = (scratch.join("s.json"), scratch.join("x.exr"));
+    for (flag, expected) in [(None, 512), (Some("auto"), auto), (Some("80"), 80)] {
+        let mut args = vec![scene.to_str().unwrap(), "--iterations", "0", "--width", "16", "--height", "16"];
+        args.extend(["--direct-passes", "1", "--quiet", "--out", out.to_str().unwrap()]);
+        args.extend(["--stats", stats.to_str().unwrap()]);
+        if let Some(value) = flag {
+            args.extend(["--hemicube-resolution", value]);
+        }
+        let o = firstshot(&args);
+        assert_eq!(o.status.code(), Some(0), "{flag:?}: {}", stderr(&o));
+        let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        assert_eq!(json["hemicube_resolution"], expected, "{flag:?}");
+    }
 }

@@ -433,6 +433,9 @@ fn test12_settings_and_environment_refusals() {
     refused(&with("patch_size = inf"), "settings.patch_size");
     refused(&with("hemicube_resolution = 0"), "settings.hemicube_resolution");
     refused(&with("hemicube_resolution = 16385"), "settings.hemicube_resolution");
+    assert_contains(&refused(&with("hemicube_resolution = \"fine\""), "settings.hemicube_resolution"), "\"auto\"");
+    assert_eq!(load_str(&with("hemicube_resolution = \"auto\""), source()).unwrap().settings.hemicube_resolution, None);
+    assert_eq!(load_str(&with("hemicube_resolution = 96"), source()).unwrap().settings.hemicube_resolution, Some(96));
     refused(&with("bundle_resolution = 0"), "settings.bundle_resolution");
     refused(&with("bundle_resolution = 1e9"), "settings.bundle_resolution");
     assert_contains(&refused(&with("bundle_resolution = \"fine\""), "settings.bundle_resolution"), "\"auto\"");

@@ -214,7 +214,11 @@ fn settings(t: &Tbl) -> Result<Settings> {
         s.patch_size = p.positive()?;
     }
     if let Some(r) = t.get("hemicube_resolution") {
-        s.hemicube_resolution = Some(r.integer(1, MAX_RESOLUTION)? as u32);
+        s.hemicube_resolution = match r.value.as_str() {
+            Some("auto") => None,
+            Some(_) => return Err(r.expected("an integer or \"auto\"")),
+            None => Some(r.integer(1, MAX_RESOLUTION)? as u32),
+        };
     }
     if let Some(r) = t.get("bundle_resolution") {
         s.bundle_resolution = match r.value.as_str() {
