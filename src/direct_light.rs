@@ -161,27 +161,14 @@ pub fn auto_resolution(scene: &Scene, patches: &Patches, floor: u32) -> u32 {
             points.push(t.vertices.iter().sum::<DVec3>() / 3.0);
         }
     }
-    let mut q: Vec<f64> = Vec::with_capacity(patches.patches.len());
-    let mut worst = 0.0f64;
-    for y in points {
-        q.clear();
-        // A median needs no more than a regular sample of the patches (every k-th).
-        q.extend(patches.median_sample().map(|p| {
-            let centre = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0;
-            (y - centre).length() / p.area.sqrt()
-        }));
-        if let Some(median) = median(&mut q) {
-            worst = worst.max(median);
-        }
-    }
+    let worst = points.into_iter().filter_map(|y| patches.median_distance_ratio(y, None)).fold(0.0, f64::max);
     side_for(worst, floor)
 }
 
 /// The face side that makes a patch of median q `TEXELS_PER_PATCH` texels across: a
 /// multiple of 16, at least `floor`, at most `AUTO_RESOLUTION_MAX` unless `floor` is more.
 fn side_for(median_q: f64, floor: u32) -> u32 {
-    let wanted = (2.0 * TEXELS_PER_PATCH * median_q).ceil().min(AUTO_RESOLUTION_MAX as f64) as u32;
-    floor.max(wanted.div_ceil(16) * 16)
+    floor.max(first_shot::face_side(median_q, TEXELS_PER_PATCH, AUTO_RESOLUTION_MAX))
 }
 
 /// The side `auto_resolution`'s rule asks of each face of a window at `y` whose faces look

@@ -292,30 +292,34 @@ const AUTO_SAMPLES: usize = 64;
 /// `direct_light::SUN_VIEW_SCALE` R pixels: sqrt(A) S R / (2 r) pixels, the same rule with
 /// q = r / (S sqrt(A)).
 pub fn auto_resolution(patches: &Patches) -> u32 {
-    // The bounding sphere is a pass over every patch: only a sun needs it.
-    let suns = patches.samples.iter().any(|s| matches!(s.kind, SampleKind::Directional { .. }));
-    let radius = if suns { crate::gpu::scene_buffers::bounding_sphere(patches).1 } else { 0.0 };
     let step = patches.samples.len().div_ceil(AUTO_SAMPLES).max(1);
-    let mut q = Vec::new();
     let mut worst = 0.0f64;
+    let mut suns = false;
     for sample in patches.samples.iter().step_by(step) {
-        q.clear();
-        let facing = match sample.kind {
-            SampleKind::AreaVertex { normal } => Some(normal),
-            _ => None,
-        };
-        let sun = matches!(sample.kind, SampleKind::Directional { .. });
-        q.extend(patches.median_sample().filter_map(|p| {
-            let w = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - sample.position;
-            match sun {
-                true => Some(radius / (crate::direct_light::SUN_VIEW_SCALE as f64 * p.area.sqrt())),
-                false => (!facing.is_some_and(|n| n.dot(w) <= 0.0)).then(|| w.length() / p.area.sqrt()),
+        let q = match sample.kind {
+            SampleKind::Directional { .. } => {
+                suns = true;
+                continue;
             }
-        }));
-        if let Some(m) = crate::scene::tessellate::median(&mut q) {
-            worst = worst.max(m);
-        }
+            SampleKind::AreaVertex { normal } => patches.median_distance_ratio(sample.position, Some(normal)),
+            SampleKind::Point | SampleKind::Spot { .. } => patches.median_distance_ratio(sample.position, None),
+        };
+        worst = worst.max(q.unwrap_or(0.0));
     }
-    let wanted = (2.0 * PIXELS_PER_PATCH * worst).ceil().min(AUTO_RESOLUTION_MAX as f64) as u32;
-    (wanted.div_ceil(16) * 16).clamp(AUTO_RESOLUTION_MIN, AUTO_RESOLUTION_MAX)
+    if suns {
+        // Every sun's view spans the same sphere, whatever its direction. (The bounding
+        // sphere is a pass over every patch: only a sun needs it.)
+        let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+        let scale = crate::direct_light::SUN_VIEW_SCALE as f64;
+        let mut q: Vec<f64> = patches.median_sample().map(|p| radius / (scale * p.area.sqrt())).collect();
+        worst = worst.max(crate::scene::tessellate::median(&mut q).unwrap_or(0.0));
+    }
+    face_side(worst, PIXELS_PER_PATCH, AUTO_RESOLUTION_MAX).clamp(AUTO_RESOLUTION_MIN, AUTO_RESOLUTION_MAX)
+}
+
+/// The face side, a multiple of 16, that shows a patch at q (`Patches::median_distance_ratio`)
+/// `pixels_across` pixels across (R = 2 pixels_across q), before rounding at most `max`.
+pub fn face_side(q: f64, pixels_across: f64, max: u32) -> u32 {
+    let wanted = (2.0 * pixels_across * q).ceil().min(max as f64) as u32;
+    wanted.div_ceil(16) * 16
 }

@@ -167,6 +167,21 @@ impl Patches {
         self.patches.iter().step_by(stride).filter(|p| p.area > 0.0)
     }
 
+    /// The median over `median_sample` of q = |centre - y| / sqrt(area), of the patches in
+    /// front of a surface at `y` with normal `facing` where one is given: a window face whose
+    /// full edge of R pixels spans 2 tangent units shows a patch at q, facing y, R / (2 q)
+    /// pixels across (the automatic hemicube and shadow-window resolutions).
+    pub fn median_distance_ratio(&self, y: DVec3, facing: Option<DVec3>) -> Option<f64> {
+        let mut q: Vec<f64> = self
+            .median_sample()
+            .filter_map(|p| {
+                let w = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - y;
+                (!facing.is_some_and(|n| n.dot(w) <= 0.0)).then(|| w.length() / p.area.sqrt())
+            })
+            .collect();
+        median(&mut q)
+    }
+
     pub fn stats(&self) -> PatchStats {
         let light_patches = self.patches.iter().filter(|p| matches!(p.kind, PatchKind::AreaLight { .. })).count();
         PatchStats {
