@@ -214,18 +214,10 @@ fn settings(t: &Tbl) -> Result<Settings> {
         s.patch_size = p.positive()?;
     }
     if let Some(r) = t.get("hemicube_resolution") {
-        s.hemicube_resolution = match r.value.as_str() {
-            Some("auto") => None,
-            Some(_) => return Err(r.expected("an integer or \"auto\"")),
-            None => Some(r.integer(1, MAX_RESOLUTION)? as u32),
-        };
+        s.hemicube_resolution = r.resolution_or_auto()?;
     }
     if let Some(r) = t.get("bundle_resolution") {
-        s.bundle_resolution = match r.value.as_str() {
-            Some("auto") => None,
-            Some(_) => return Err(r.expected("an integer or \"auto\"")),
-            None => Some(r.integer(1, MAX_RESOLUTION)? as u32),
-        };
+        s.bundle_resolution = r.resolution_or_auto()?;
     }
     if let Some(b) = t.get("bundles_per_step") {
         s.bundles_per_step = match b.value.as_str() {
@@ -803,6 +795,15 @@ impl<'a> Item<'a> {
 
     pub(super) fn boolean(&self) -> Result<bool> {
         self.value.as_bool().ok_or_else(|| self.expected("true or false"))
+    }
+
+    /// A resolution in pixels, or "auto" (`None`: the automatic choice).
+    fn resolution_or_auto(&self) -> Result<Option<u32>> {
+        match self.value.as_str() {
+            Some("auto") => Ok(None),
+            Some(_) => Err(self.expected("an integer or \"auto\"")),
+            None => Ok(Some(self.integer(1, MAX_RESOLUTION)? as u32)),
+        }
     }
 
     pub(super) fn integer(&self, min: i64, max: i64) -> Result<i64> {
