@@ -175,19 +175,36 @@ fn max_lobe_albedo(shininess: f64) -> f64 {
         grid.extend([offset, FRAC_PI_2 - offset]);
     }
     grid.sort_by(f64::total_cmp);
-    let values: Vec<f64> = grid.iter().map(|&t| lobe(t)).collect();
+    // The grid's quadratures in two halves on two threads: each is a few hundred
+    // microseconds, and the loader bounds every max-Phong material this way.
+    let values: Vec<f64> = {
+        let (first, second) = grid.split_at(grid.len() / 2);
+        std::thread::scope(|scope| {
+            let other = scope.spawn(|| second.iter().map(|&t| lobe(t)).collect::<Vec<f64>>());
+            let mut values: Vec<f64> = first.iter().map(|&t| lobe(t)).collect();
+            values.extend(other.join().expect("the albedo quadrature does not panic"));
+            values
+        })
+    };
     let best = (0..grid.len()).max_by(|&i, &j| values[i].total_cmp(&values[j])).unwrap_or(0);
     let (mut lo, mut hi) = (grid[best.saturating_sub(1)], grid[(best + 1).min(grid.len() - 1)]);
+    // Golden-section search: each round keeps one of its two inner points, so it costs one
+    // new quadrature.
     let ratio = 0.5 * (5f64.sqrt() - 1.0);
-    let mut best_value = values[best];
+    let (mut x1, mut x2) = (hi - ratio * (hi - lo), lo + ratio * (hi - lo));
+    let (mut f1, mut f2) = (lobe(x1), lobe(x2));
+    let mut best_value = values[best].max(f1).max(f2);
     for _ in 0..40 {
-        let (x1, x2) = (hi - ratio * (hi - lo), lo + ratio * (hi - lo));
-        let (f1, f2) = (lobe(x1), lobe(x2));
-        best_value = best_value.max(f1).max(f2);
         if f1 >= f2 {
-            hi = x2;
+            (hi, x2, f2) = (x2, x1, f1);
+            x1 = hi - ratio * (hi - lo);
+            f1 = lobe(x1);
+            best_value = best_value.max(f1);
         } else {
-            lo = x1;
+            (lo, x1, f1) = (x1, x2, f2);
+            x2 = lo + ratio * (hi - lo);
+            f2 = lobe(x2);
+            best_value = best_value.max(f2);
         }
     }
     best_value
