@@ -9,7 +9,7 @@ use crate::layout::{GpuBundle, LINE_BUCKET};
 use crate::rng::StepRng;
 use crate::scene::Patches;
 use crate::stages::bundle_finalize::BundleFinalize;
-use crate::stages::bundle_reflect::BundleReflect;
+use crate::stages::bundle_reflect::{BundleReflect, ReflectOutputs};
 use crate::stages::bundle_transfer::BundleTransfer;
 use crate::stages::bundle_visibility::BundleVisibility;
 use crate::{Error, Result};
@@ -334,14 +334,15 @@ impl Iteration {
             image_mean_radiance: zeroed(device, "firstshot.iteration.image_mean_radiance", OUTGOING, n, pages, none),
             sums: zeroed(device, "firstshot.iteration.sums", TRANSFER_SUMS, n, pages, none),
         };
-        Self::with_arrays(ctx, scene, arrays, resolution, capacity)
+        Self::with_arrays(ctx, scene, arrays, resolution, capacity, None)
     }
 
     /// An iteration at `resolution` with room for `capacity` fragments that shares this
-    /// one's per-patch arrays: the coarse burn-in (`coarse_burn_in`), or this resolution
-    /// with a larger fragment list after an overflow.
+    /// one's per-patch arrays and its pipelines (only the line buffers and bind groups are
+    /// new: building the pipelines again took about 45 ms on lavapipe): the coarse burn-in
+    /// (`coarse_burn_in`), or this resolution with a larger fragment list after an overflow.
     pub fn resized(&self, ctx: &Context, scene: &SceneBuffers, resolution: u32, capacity: u64) -> Result<Self> {
-        Self::with_arrays(ctx, scene, self.arrays.clone(), resolution, capacity)
+        Self::with_arrays(ctx, scene, self.arrays.clone(), resolution, capacity, Some(self))
     }
 
     fn with_arrays(
@@ -350,6 +351,7 @@ impl Iteration {
         arrays: StepArrays,
         resolution: u32,
         capacity: u64,
+        like: Option<&Iteration>,
     ) -> Result<Self> {
         let device = &ctx.device;
         let limits = ctx.limits();
@@ -401,10 +403,9 @@ impl Iteration {
                 device,
                 scene,
                 &bundle,
-                outgoing,
                 &max_bits,
-                image_outgoing,
-                image_mean_radiance,
+                ReflectOutputs { outgoing, image_outgoing, image_mean_radiance },
+                like.map(|l| &l.reflect),
             ),
             visibility: BundleVisibility::new(
                 device,
@@ -420,6 +421,7 @@ impl Iteration {
                     outgoing.resource(),
                 ],
                 resolution,
+                like.map(|l| &l.visibility),
             ),
             transfer: BundleTransfer::new(
                 device,
@@ -438,6 +440,7 @@ impl Iteration {
                     (&max_bits).into(),
                 ],
                 lines,
+                like.map(|l| &l.transfer),
             ),
             finalize: BundleFinalize::new(
                 device,
@@ -450,6 +453,7 @@ impl Iteration {
                     scene.state.resource(),
                 ],
                 scene.patch_count,
+                like.map(|l| &l.finalize),
             ),
             gather: GatherBuffers {
                 bundle: bundle.clone(),

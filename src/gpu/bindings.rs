@@ -419,6 +419,7 @@ impl KernelSpec {
 }
 
 /// A kernel built from its spec: what its pipelines and bind groups are made from.
+#[derive(Clone)]
 pub struct Kernel {
     pub spec: KernelSpec,
     pub module: wgpu::ShaderModule,

@@ -1,6 +1,6 @@
 //! Bundle finalize (`wgsl/bundle_finalize.wgsl`): the fixed-point sums into J_j and win_j.
 
-use crate::gpu::bindings::{KernelSpec, Resource, compute, read, read_write, uniform};
+use crate::gpu::bindings::{Kernel, KernelSpec, Resource, compute, read, read_write, uniform};
 use crate::gpu::kernel;
 use crate::gpu::scene_buffers::{OUTGOING, PATCH_STATE, PATCH_TABLE, TRANSFER_SUMS};
 use crate::layout::{GpuBundle, GpuPatch, GpuPatchState};
@@ -24,6 +24,7 @@ pub const SPEC: KernelSpec = KernelSpec {
 };
 
 pub struct BundleFinalize {
+    kernel: Kernel,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     patch_count: u32,
@@ -31,13 +32,17 @@ pub struct BundleFinalize {
 
 impl BundleFinalize {
     /// `buffers`: bundle, patches, sums, max_bits, outgoing, state (`SPEC`'s group 0).
-    pub fn new(device: &wgpu::Device, buffers: [Resource; 6], patch_count: u32) -> Self {
-        let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
-        BundleFinalize {
-            pipeline: built.compute_pipeline(device, "main"),
-            bind_group: built.resource_bind_group(device, 0, &buffers),
-            patch_count,
-        }
+    /// `like`: a stage over arrays of the same paging whose pipeline this one shares.
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 6], patch_count: u32, like: Option<&Self>) -> Self {
+        let (kernel, pipeline) = match like {
+            Some(like) => (like.kernel.clone(), like.pipeline.clone()),
+            None => {
+                let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
+                let pipeline = built.compute_pipeline(device, "main");
+                (built, pipeline)
+            }
+        };
+        BundleFinalize { bind_group: kernel.resource_bind_group(device, 0, &buffers), kernel, pipeline, patch_count }
     }
 
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder) {

@@ -1,7 +1,7 @@
 //! Bundle reflection (`wgsl/bundle_reflect.wgsl`): O_j of every patch into this step's
 //! bundle, and the step's largest radiance.
 
-use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uniform};
+use crate::gpu::bindings::{Kernel, KernelSpec, compute, read, read_write, uniform};
 use crate::gpu::kernel;
 use crate::gpu::scene_buffers::{FIRST_SHOT_TABLE_GROUP, OUTGOING, PATCH_STATE, PATCH_TABLE, Paged, SceneBuffers};
 use crate::layout::{GpuBundle, GpuMaterial, GpuPatch, GpuPatchState};
@@ -34,25 +34,42 @@ pub const SPEC: KernelSpec = KernelSpec {
 };
 
 pub struct BundleReflect {
+    kernel: Kernel,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     table_group: wgpu::BindGroup,
     patch_count: u32,
 }
 
+/// What a reflection writes for each patch: O_j into the bundle, and what the image's
+/// gather reads (`SPEC`'s bindings of the same names).
+pub struct ReflectOutputs<'a> {
+    pub outgoing: &'a Paged,
+    pub image_outgoing: &'a Paged,
+    pub image_mean_radiance: &'a Paged,
+}
+
 impl BundleReflect {
+    /// `like`: a stage over arrays of the same paging whose pipeline this one shares.
     pub fn new(
         device: &wgpu::Device,
         scene: &SceneBuffers,
         bundle: &wgpu::Buffer,
-        outgoing: &Paged,
         max_bits: &wgpu::Buffer,
-        image_outgoing: &Paged,
-        image_mean_radiance: &Paged,
+        outputs: ReflectOutputs<'_>,
+        like: Option<&Self>,
     ) -> Self {
-        let built = SPEC.build_paged(device, scene.paging());
+        let ReflectOutputs { outgoing, image_outgoing, image_mean_radiance } = outputs;
+        let (built, pipeline) = match like {
+            Some(like) => (like.kernel.clone(), like.pipeline.clone()),
+            None => {
+                let built = SPEC.build_paged(device, scene.paging());
+                let pipeline = built.compute_pipeline(device, "main");
+                (built, pipeline)
+            }
+        };
         BundleReflect {
-            pipeline: built.compute_pipeline(device, "main"),
+            pipeline,
             bind_group: built.bind_group(
                 device,
                 0,
@@ -69,6 +86,7 @@ impl BundleReflect {
             ),
             table_group: scene.first_shot.bind_group(device, &built.layouts[1], built.paging, &scene.samples),
             patch_count: scene.patch_count,
+            kernel: built,
         }
     }
 

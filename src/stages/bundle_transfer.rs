@@ -1,7 +1,7 @@
 //! Bundle transfer (`wgsl/bundle_transfer.wgsl`): sorts every line's surfaces and adds the
 //! radiance each patch receives to its fixed-point sums.
 
-use crate::gpu::bindings::{KernelSpec, Resource, compute, read, read_write, uniform};
+use crate::gpu::bindings::{Kernel, KernelSpec, Resource, compute, read, read_write, uniform};
 use crate::gpu::kernel;
 use crate::gpu::scene_buffers::{OUTGOING, TRANSFER_SUMS};
 use crate::layout::GpuBundle;
@@ -40,6 +40,7 @@ pub const SPEC: KernelSpec = KernelSpec {
 };
 
 pub struct BundleTransfer {
+    kernel: Kernel,
     long_lines: wgpu::ComputePipeline,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
@@ -49,12 +50,22 @@ pub struct BundleTransfer {
 impl BundleTransfer {
     /// `buffers`: bundle, counts, heads, fragments, spill, tally, overflow, slices,
     /// long_lines, outgoing, sums, max_bits (`SPEC`'s group 0).
-    pub fn new(device: &wgpu::Device, buffers: [Resource; 12], lines: u32) -> Self {
-        let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
+    /// `like`: a stage over arrays of the same paging whose pipelines this one shares.
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 12], lines: u32, like: Option<&Self>) -> Self {
+        let (kernel, long_lines, pipeline) = match like {
+            Some(like) => (like.kernel.clone(), like.long_lines.clone(), like.pipeline.clone()),
+            None => {
+                let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
+                let long_lines = built.compute_pipeline(device, "gather_long_lines");
+                let pipeline = built.compute_pipeline(device, "main");
+                (built, long_lines, pipeline)
+            }
+        };
         BundleTransfer {
-            long_lines: built.compute_pipeline(device, "gather_long_lines"),
-            pipeline: built.compute_pipeline(device, "main"),
-            bind_group: built.resource_bind_group(device, 0, &buffers),
+            bind_group: kernel.resource_bind_group(device, 0, &buffers),
+            kernel,
+            long_lines,
+            pipeline,
             lines,
         }
     }

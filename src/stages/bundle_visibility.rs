@@ -1,7 +1,7 @@
 //! Bundle visibility (`wgsl/bundle_visibility.wgsl`): every surface on every line of the
 //! bundle's grid, in one rasterisation pass into per-line buckets and a spill list.
 
-use crate::gpu::bindings::{KernelSpec, Resource, fragment, read, read_write, uniform, vertex};
+use crate::gpu::bindings::{Kernel, KernelSpec, Resource, fragment, read, read_write, uniform, vertex};
 use crate::gpu::scene_buffers::OUTGOING;
 use crate::layout::GpuBundle;
 use crate::stages::camera_item_buffer::raster_vertex_layout;
@@ -35,6 +35,7 @@ pub const SPEC: KernelSpec = KernelSpec {
 };
 
 pub struct BundleVisibility {
+    kernel: Kernel,
     fill: wgpu::RenderPipeline,
     bind_group: wgpu::BindGroup,
     depth_view: wgpu::TextureView,
@@ -42,9 +43,13 @@ pub struct BundleVisibility {
 
 impl BundleVisibility {
     /// `buffers`: bundle, counts, heads, fragments, spill, tally, overflow, long_lines,
-    /// outgoing (`SPEC`'s group 0).
-    pub fn new(device: &wgpu::Device, buffers: [Resource; 9], resolution: u32) -> Self {
-        let built = SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers));
+    /// outgoing (`SPEC`'s group 0). `like`: a stage over arrays of the same paging whose
+    /// pipeline this one shares (its depth attachment follows `resolution`).
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 9], resolution: u32, like: Option<&Self>) -> Self {
+        let built = match like {
+            Some(like) => like.kernel.clone(),
+            None => SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers)),
+        };
         let pipeline = |entry: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(&format!("firstshot.bundle_visibility.{entry}")),
@@ -86,9 +91,10 @@ impl BundleVisibility {
             view_formats: &[],
         });
         BundleVisibility {
-            fill: pipeline("fs_fill"),
+            fill: like.map_or_else(|| pipeline("fs_fill"), |like| like.fill.clone()),
             bind_group: built.resource_bind_group(device, 0, &buffers),
             depth_view: depth.create_view(&Default::default()),
+            kernel: built,
         }
     }
 
