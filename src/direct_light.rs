@@ -117,11 +117,12 @@ pub struct DirectLights {
 }
 
 /// The face side asked of the lights' windows: `options.shadow_resolution`, else
-/// `auto_resolution` (before the atlas budget, which may halve it).
-pub fn shadow_resolution(scene: &Scene, patches: &Patches, options: &RenderOptions) -> u32 {
-    options
-        .shadow_resolution
-        .unwrap_or_else(|| auto_resolution(scene, patches, options.hemicube_resolution_for(patches)))
+/// `auto_resolution` with the first shot's `hemicube_resolution` (the one in use,
+/// `RenderOptions::hemicube_resolution_for`) as its floor (before the atlas budget, which
+/// may halve it). The caller resolves the hemicube resolution once: its automatic choice
+/// is a median over the patches for every light sample.
+pub fn shadow_resolution(scene: &Scene, patches: &Patches, options: &RenderOptions, hemicube_resolution: u32) -> u32 {
+    options.shadow_resolution.unwrap_or_else(|| auto_resolution(scene, patches, hemicube_resolution))
 }
 
 /// The face side of the per-pixel direct light's windows when none is asked for: at least
@@ -268,7 +269,8 @@ impl DirectLights {
         options: &RenderOptions,
     ) -> Self {
         let (first_shot, window, seed) = (options.first_shot, options.light_window, options.seed);
-        let resolution = shadow_resolution(scene, patches, options);
+        let hemicube_resolution = options.hemicube_resolution_for(patches);
+        let resolution = shadow_resolution(scene, patches, options, hemicube_resolution);
         let mut sources = Vec::new();
         for (l, light) in scene.lights.iter().enumerate().filter(|_| first_shot) {
             match *light {
@@ -328,9 +330,7 @@ impl DirectLights {
                     Source::Area { shared: true, .. } | Source::Directional { .. } => None,
                 };
                 match per_face {
-                    Some(lit) => {
-                        auto_face_sides(*position, &forwards, lit, patches, options.hemicube_resolution_for(patches))
-                    }
+                    Some(lit) => auto_face_sides(*position, &forwards, lit, patches, hemicube_resolution),
                     None => vec![resolution; forwards.len()],
                 }
             })

@@ -150,16 +150,16 @@ pub fn predict(
         }
         false => 0,
     };
+    // Resolved once: the automatic choice is a median over the patches for every light
+    // sample, and the lights' windows take it as their floor.
+    let hemicube_resolution = options.hemicube_resolution_for(patches);
     let hemicube = match options.first_shot {
-        true => {
-            let r = options.hemicube_resolution_for(patches) as u64;
-            r * r * 8
-        }
+        true => hemicube_resolution as u64 * hemicube_resolution as u64 * 8,
         false => 0,
     };
     // The lights' windows: six faces a light at most (a hemicube's five, packed), a sun's
     // parallel view 16 (`direct_light::SUN_VIEW_SCALE`), within the atlases' budget.
-    let side = crate::direct_light::shadow_resolution(scene, patches, options) as u64;
+    let side = crate::direct_light::shadow_resolution(scene, patches, options, hemicube_resolution) as u64;
     let face = side * side;
     let suns = scene.lights.iter().filter(|l| matches!(l, crate::scene::Light::Directional { .. })).count() as u64;
     let shadow_texels =

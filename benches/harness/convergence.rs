@@ -261,6 +261,7 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<SceneResult,
             });
         }
     }
+    let hemicube_resolution = base.hemicube_resolution_for(&s.patches);
     let plot = Plot {
         title: format!("{}: relative RMSE against time, with and without first shot", s.name),
         subtitle: format!(
@@ -271,7 +272,7 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<SceneResult,
             base.width,
             base.height,
             base.bundle_resolution.unwrap_or_default(),
-            base.hemicube_resolution_for(&s.patches),
+            hemicube_resolution,
             config.long_steps
         ),
         x_label: "seconds (whole render, first shot included)".into(),
@@ -288,7 +289,7 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<SceneResult,
         patches: s.patches.patches.len(),
         image: [base.width, base.height],
         bundle_resolution: base.bundle_resolution.unwrap_or_default(),
-        hemicube_resolution: base.hemicube_resolution_for(&s.patches),
+        hemicube_resolution,
         seed: base.seed,
         long_seed,
         long_steps: config.long_steps,
