@@ -738,21 +738,30 @@ impl<'a> Renderer<'a> {
         // Only a first-shot emitting shape's light is shared between D and G; without one the
         // gather skips the test (two loads of the sender's patch a pixel).
         let mis = gathers && options.first_shot && !patches.emitters.is_empty();
-        let views = options
-            .views(scene)
-            .into_iter()
-            .map(|NamedCamera { name, camera }| {
-                let item_buffer = CameraItemBuffer::new(device, camera.width, camera.height);
-                let gather = iteration.as_ref().map(|i| &i.gather);
-                let band_rows = options
-                    .image_band_rows
-                    .unwrap_or_else(|| crate::stages::image_estimate::band_rows(&device.limits(), camera.width));
-                let stride = crate::iteration::pixel_stride(per_step);
-                let estimate = ImageEstimate::new(device, &buffers, &item_buffer, &direct, gather, band_rows, stride);
-                estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);
-                ViewImage { name, camera, item_buffer, estimate }
-            })
-            .collect();
+        // The views after the first share its kernels and pipelines (about 80 ms of pipeline
+        // builds a view on lavapipe): only their buffers, textures and bind groups are new.
+        let mut views: Vec<ViewImage> = Vec::new();
+        for NamedCamera { name, camera } in options.views(scene) {
+            let like = views.first();
+            let item_buffer = CameraItemBuffer::new(device, camera.width, camera.height, like.map(|v| &v.item_buffer));
+            let gather = iteration.as_ref().map(|i| &i.gather);
+            let band_rows = options
+                .image_band_rows
+                .unwrap_or_else(|| crate::stages::image_estimate::band_rows(&device.limits(), camera.width));
+            let stride = crate::iteration::pixel_stride(per_step);
+            let estimate = ImageEstimate::new(
+                device,
+                &buffers,
+                &item_buffer,
+                &direct,
+                gather,
+                band_rows,
+                stride,
+                like.map(|v| &v.estimate),
+            );
+            estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);
+            views.push(ViewImage { name, camera, item_buffer, estimate });
+        }
         Ok(Renderer {
             ctx,
             scene,

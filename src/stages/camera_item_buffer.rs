@@ -76,6 +76,7 @@ impl View {
 
 /// Pipeline and targets of the camera item buffer.
 pub struct CameraItemBuffer {
+    kernel: Kernel,
     pipeline: wgpu::RenderPipeline,
     bind_group: wgpu::BindGroup,
     pub camera: wgpu::Buffer,
@@ -87,9 +88,17 @@ pub struct CameraItemBuffer {
 }
 
 impl CameraItemBuffer {
-    pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
-        let built = SPEC.build(device);
-        let pipeline = item_pipeline(device, &built, "firstshot.camera_item_buffer.pipeline");
+    /// `like`: an item buffer whose kernel and pipeline this one shares (another view of
+    /// the same render: only the camera uniform, the textures and the bind group are new).
+    pub fn new(device: &wgpu::Device, width: u32, height: u32, like: Option<&Self>) -> Self {
+        let (built, pipeline) = match like {
+            Some(like) => (like.kernel.clone(), like.pipeline.clone()),
+            None => {
+                let built = SPEC.build(device);
+                let pipeline = item_pipeline(device, &built, "firstshot.camera_item_buffer.pipeline");
+                (built, pipeline)
+            }
+        };
         let camera = buffers::uniform(
             device,
             "firstshot.camera_item_buffer.camera",
@@ -120,6 +129,7 @@ impl CameraItemBuffer {
             view_formats: &[],
         });
         CameraItemBuffer {
+            kernel: built,
             pipeline,
             bind_group,
             camera,

@@ -112,6 +112,9 @@ impl ImageEstimate {
     /// `gather`: the bundle buffers of the iteration, or `None` for direct-light-only passes.
     /// `band_rows`: rows per band of the image sum (`band_rows`, or fewer to test the bands).
     /// `pixel_stride`: `iteration::pixel_stride` of the step's bundles.
+    /// `like`: the estimate of another view of the same render, whose kernel and pipelines
+    /// this one shares (they depend on the scene's paging and lights, not on the camera).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         device: &wgpu::Device,
         scene: &SceneBuffers,
@@ -120,12 +123,24 @@ impl ImageEstimate {
         gather: Option<&GatherBuffers>,
         band_rows: u32,
         pixel_stride: u32,
+        like: Option<&Self>,
     ) -> Self {
-        let built = SPEC.build_paged(device, scene.paging());
-        // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
-        let direct_pipeline = built.specialized_pipeline(device, "direct", &direct.specialization());
-        let gather_pipeline = built.specialized_pipeline(device, "gather", &[("SEEN_IN_GATHER", 1.0)]);
-        let edges_pipeline = built.compute_pipeline(device, "gather_edges");
+        let (built, direct_pipeline, gather_pipeline, edges_pipeline) = match like {
+            Some(like) => (
+                like.built.clone(),
+                like.direct_pipeline.clone(),
+                like.gather_pipeline.clone(),
+                like.edges_pipeline.clone(),
+            ),
+            None => {
+                let built = SPEC.build_paged(device, scene.paging());
+                // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
+                let direct_pipeline = built.specialized_pipeline(device, "direct", &direct.specialization());
+                let gather_pipeline = built.specialized_pipeline(device, "gather", &[("SEEN_IN_GATHER", 1.0)]);
+                let edges_pipeline = built.compute_pipeline(device, "gather_edges");
+                (built, direct_pipeline, gather_pipeline, edges_pipeline)
+            }
+        };
         let band_rows = band_rows.max(1);
         let bands = (0..camera.height)
             .step_by(band_rows as usize)
