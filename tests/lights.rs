@@ -726,3 +726,46 @@ fn test11_a_sun_a_spot_and_a_point_light_together_light_as_the_sum_of_each_alone
     eprintln!("pixels lit by each light alone (per channel): {lit:?}; worst relative difference {worst:.2e}");
     assert!(lit.iter().all(|&n| n > 500), "each light must light part of the floor: {lit:?}");
 }
+
+#[test]
+fn test12_sun_behind_a_wall_does_not_light_the_crease_at_its_foot() {
+    // A wall standing on a floor with the sun behind it: the floor in front lies in the
+    // wall's shadow and the wall's front faces away from the sun, so the whole view of the
+    // crease where they meet is black. A point of the floor within a few millimetres of the
+    // wall lies that close to the wall's plane; taking every plane that near x for x's own
+    // (a share of the segment to the sun's view, 1e-4 of it) let the sun through there: the
+    // crease pixels of this close view came out lit.
+    let text = r#"
+format = 1
+[camera]
+position = [0.0, 0.05, -0.08]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y = 30.0
+width = 32
+height = 32
+[settings]
+patch_size = 0.5
+[materials.grey]
+type = "diffuse"
+albedo = [0.6, 0.6, 0.6]
+[[shapes]] # floor, in front of the wall
+type = "quad"
+vertices = [[-1.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, -1.0]]
+material = "grey"
+[[shapes]] # wall at z = 0, facing -z (the camera)
+type = "quad"
+vertices = [[-1.0, 0.0, 0.0], [-1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, 0.0]]
+material = "grey"
+[[lights]]
+type = "directional"
+direction = [0.0, -0.6, -0.8]
+irradiance = [2.0, 2.0, 2.0]
+"#;
+    let (_scratch, scene) = load("crease", text);
+    let Some(image) = common::render_direct(&scene, 16) else { return };
+    // Sunlit, the floor would be 0.6 / pi * 2 * 0.6 = 0.23.
+    let brightest = image.pixels.iter().map(|p| p[0]).fold(0.0f32, f32::max);
+    let lit = image.pixels.iter().filter(|p| p[0] > 1e-4).count();
+    assert!(brightest <= 1e-5, "{lit} of {} pixels lit, the brightest {brightest}", image.pixels.len());
+}

@@ -423,3 +423,80 @@ fn test06_glossy_interreflection_matches_mitsuba() {
         assert!((mean - 1.0).abs() < 3.0 * standard_error, "channel {c}: {mean:.4} +- {standard_error:.4}");
     }
 }
+
+/// The spot lights the converter is held to: sun_room's, the default cone on a tilted axis,
+/// a narrow one, a wide one and one with a ramp of one degree.
+fn spots() -> Vec<Value> {
+    let spot = |position: [f64; 3], direction: [f64; 3], intensity: [f64; 3], inner: f64, outer: f64| {
+        serde_json::json!({ "type": "spot", "position": position, "direction": direction,
+            "intensity": intensity, "inner_angle": inner, "outer_angle": outer })
+    };
+    vec![
+        spot([1.2, 2.95, 3.7], [0.0, -1.0, 0.0], [4.0, 3.6, 2.8], 15.0, 30.0),
+        spot([0.0, 1.0, 0.0], [1.0, -1.0, 0.5], [1.0, 2.0, 3.0], 0.0, 45.0),
+        spot([0.5, 0.0, -2.0], [1.0, 0.0, 0.0], [10.0, 10.0, 10.0], 5.0, 10.0),
+        spot([0.0, 3.0, 0.0], [0.0, 0.3, -1.0], [0.5, 0.4, 0.3], 60.0, 80.0),
+        spot([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [2.0, 2.0, 2.0], 29.0, 30.0),
+    ]
+}
+
+#[test]
+fn test07_converted_spot_lights_fall_off_as_ours() {
+    // Mitsuba's own spot falls off linearly in the angle; the converter gives it glTF's
+    // falloff as a texture (tools/mitsuba/convert.py, `spot`). Here Mitsuba's emitted
+    // intensity is held against `SpotCone` at angles from the axis to past the outer angle,
+    // at eight azimuths each. The texture is filtered bilinearly, so within a texel of the
+    // direction the falloff may differ by what it changes over that texel (largest at the
+    // inner angle's kink); elsewhere f32 rounding.
+    let Some(python) = common::mitsuba_python() else { return };
+    let texels = 1024.0; // convert.SPOT_TEXELS
+    let mut cases = Vec::new();
+    for light in spots() {
+        let axis = vec3(&light["direction"]).normalize();
+        let (u, v) = axis.any_orthonormal_pair();
+        let outer = light["outer_angle"].as_f64().unwrap();
+        let mut directions = Vec::new();
+        for k in 0..=60 {
+            let theta = (outer + 5.0).min(89.0) * k as f64 / 60.0;
+            for a in 0..8 {
+                let phi = (a as f64 + 0.3) * std::f64::consts::TAU / 8.0;
+                let t = theta.to_radians();
+                directions.push(axis * t.cos() + (u * phi.cos() + v * phi.sin()) * t.sin());
+            }
+        }
+        cases.push((light, directions));
+    }
+    let input: Vec<Value> = cases
+        .iter()
+        .map(|(light, directions)| {
+            let d: Vec<[f64; 3]> = directions.iter().map(|d| d.to_array()).collect();
+            serde_json::json!({ "light": light, "directions": d })
+        })
+        .collect();
+    let file = common::output_dir("mitsuba_spots").join("spots.json");
+    std::fs::write(&file, serde_json::to_string(&input).unwrap()).unwrap();
+    let out = run_json(&python, "check_spot.py", &[file.to_str().unwrap()]);
+    for ((light, directions), result) in cases.iter().zip(out["results"].as_array().unwrap()) {
+        let axis = vec3(&light["direction"]).normalize();
+        let (inner, outer) = (light["inner_angle"].as_f64().unwrap(), light["outer_angle"].as_f64().unwrap());
+        let cone = scene::SpotCone::new(inner, outer);
+        let intensity = vec3(&light["intensity"]);
+        // One texel of the texture, as an angle at the axis (the widest a texel gets).
+        let texel = 2.0 * outer.to_radians().tan() / texels;
+        for (d, measured) in directions.iter().zip(result["intensities"].as_array().unwrap()) {
+            let theta = d.dot(axis).clamp(-1.0, 1.0).acos();
+            let at = |t: f64| cone.falloff(t.clamp(0.0, std::f64::consts::FRAC_PI_2).cos());
+            let change = (at(theta - texel) - at(theta + texel)).abs();
+            for c in 0..3 {
+                let ours = intensity[c] * at(theta);
+                let theirs = measured[c].as_f64().unwrap();
+                let tol = intensity[c] * (change + 1e-4);
+                assert!(
+                    (theirs - ours).abs() <= tol,
+                    "spot {light}: at {:.3} degrees from the axis, channel {c}: Mitsuba {theirs}, ours {ours} (+- {tol})",
+                    theta.to_degrees()
+                );
+            }
+        }
+    }
+}

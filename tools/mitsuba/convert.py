@@ -252,6 +252,72 @@ def bsdf(material, two_sided):
     return {"type": "twosided", "material": b} if two_sided else b
 
 
+# Texels a side of the falloff texture that carries a spot light's cone (`spot`).
+SPOT_TEXELS = 1024
+
+# Mitsuba's spot maps its texture over the tangent plane up to tan(cutoff_angle); beyond
+# about 80 degrees the cone's middle would shrink to a few texels.
+SPOT_MAX_OUTER_ANGLE = 80.0
+
+# The fewest texels from the inner to the outer angle: the texture is filtered bilinearly,
+# which departs from the falloff by up to a texel's change of it.
+SPOT_MIN_RAMP_TEXELS = 8
+
+
+def spot_falloff(cd, inner_angle, outer_angle):
+    """glTF's (KHR_lights_punctual) cone falloff at the cosine cd to the axis, as
+    docs/SCENE_FORMAT.md writes it (angles in degrees)."""
+    import numpy as np
+
+    cos_inner, cos_outer = math.cos(math.radians(inner_angle)), math.cos(math.radians(outer_angle))
+    scale = 1.0 / max(0.001, cos_inner - cos_outer)
+    return np.clip(cd * scale - cos_outer * scale, 0.0, 1.0) ** 2
+
+
+def spot(light, i):
+    """A spot light as Mitsuba's `spot` whose texture is glTF's falloff. Mitsuba's own falloff
+    is linear in the angle between `beam_width` and `cutoff_angle`, glTF's quadratic in the
+    cosine: here Mitsuba's cone is full up to the outer angle (its linear ramp squeezed into
+    a thousandth of a degree, where glTF's falloff is 0 anyway), and the texture, which
+    Mitsuba looks up at uv = (1 + x / (z tan(cutoff))) / 2, (1 + y / (z tan(cutoff))) / 2 for
+    the light-space direction (x, y, z), holds glTF's falloff at each texel's direction
+    (`tools/mitsuba/check_spot.py` checks both against the formula)."""
+    import mitsuba as mi
+    import numpy as np
+
+    inner, outer = float(light.get("inner_angle", 0.0)), float(light.get("outer_angle", 45.0))
+    if outer > SPOT_MAX_OUTER_ANGLE:
+        raise ConvertError(
+            f"lights[{i}]: a spot's outer_angle above {SPOT_MAX_OUTER_ANGLE:g} degrees is not converted to Mitsuba"
+        )
+    tan_inner, tan_outer = math.tan(math.radians(inner)), math.tan(math.radians(outer))
+    ramp = (tan_outer - tan_inner) / (2.0 * tan_outer) * SPOT_TEXELS
+    if ramp < SPOT_MIN_RAMP_TEXELS:
+        raise ConvertError(
+            f"lights[{i}]: a spot whose falloff (inner_angle {inner:g} to outer_angle {outer:g}) spans fewer "
+            f"than {SPOT_MIN_RAMP_TEXELS} of its texture's {SPOT_TEXELS} texels is not converted to Mitsuba"
+        )
+    position = [float(x) for x in light["position"]]
+    axis = [float(x) for x in light["direction"]]
+    length = norm(axis)
+    axis = [x / length for x in axis]
+    up = [0.0, 1.0, 0.0] if abs(axis[1]) < 0.9 else [1.0, 0.0, 0.0]
+    c = ((np.arange(SPOT_TEXELS) + 0.5) / SPOT_TEXELS * 2.0 - 1.0) * tan_outer
+    x, y = c[None, :], c[:, None]
+    falloff = spot_falloff(1.0 / np.sqrt(1.0 + x * x + y * y), inner, outer)
+    texture = np.repeat(falloff.astype(np.float32)[:, :, None], 3, axis=2)
+    return {
+        "type": "spot",
+        "intensity": rgb(light["intensity"]),
+        "cutoff_angle": outer,
+        "beam_width": outer - 1e-3,
+        "to_world": mi.ScalarTransform4f().look_at(
+            origin=position, target=[p + a for p, a in zip(position, axis)], up=up
+        ),
+        "texture": {"type": "bitmap", "bitmap": mi.Bitmap(texture), "raw": True},
+    }
+
+
 def mitsuba_dict(path, mesh_dir, width=None, height=None, spp=64, max_depth=-1, rr_depth=5, seed=0):
     """A dict for ``mi.load_dict``; PLY meshes are written into ``mesh_dir``. Call
     ``maxphong.register()`` (after ``mi.set_variant``) before loading it."""
@@ -317,10 +383,15 @@ def mitsuba_dict(path, mesh_dir, width=None, height=None, spp=64, max_depth=-1, 
         elif light["type"] == "area":
             quad = [[float(x) for x in v] for v in light["vertices"]]
             add_mesh(f"light{i}", fan(quad), None, False, light["radiance"])
-        elif light["type"] in ("directional", "spot"):
-            # Not converted: Mitsuba's spot falls off differently from glTF's cone, and no
-            # reference uses either light yet.
-            raise ConvertError(f"lights[{i}]: {light['type']} lights are not converted to Mitsuba")
+        elif light["type"] == "directional":
+            # Mitsuba's `irradiance` is, as ours, W/m^2 on a surface facing the light.
+            out[f"light{i}"] = {
+                "type": "directional",
+                "direction": [float(x) for x in light["direction"]],
+                "irradiance": rgb(light["irradiance"]),
+            }
+        elif light["type"] == "spot":
+            out[f"light{i}"] = spot(light, i)
         else:
             raise ConvertError(f"lights[{i}]: unknown light type {light['type']!r}")
     return out
