@@ -11,6 +11,15 @@ pub const PATCH_TWIN: u32 = 1;
 /// The patch belongs to a first-shot light: its emission is seen by the camera but left out
 /// of the iteration, where its first reflection replaces it (paper eq. 11).
 pub const PATCH_FIRST_SHOT_LIGHT: u32 = 2;
+/// `PATCH_SMOOTH_EDGE << k`: the edge opposite vertex k continues into another patch of the
+/// scene within `SMOOTH_EDGE_COS` of this one's plane (the same surface goes on there), so
+/// that a sun's shadow test across that edge still meets the surface; without the bit the
+/// edge is an outline or a crease (`scene_buffers::smooth_edges`). Set only in scenes with a
+/// directional light.
+pub const PATCH_SMOOTH_EDGE: u32 = 4;
+/// The cosine between two patches' planes within which a shared edge is smooth: 30 degrees,
+/// as WGSL's NEIGHBOUR_COS (image_estimate.wgsl).
+pub const SMOOTH_EDGE_COS: f64 = 0.866;
 /// Item buffers store patch index + 1; this value means "no surface".
 pub const NO_PATCH: u32 = 0;
 /// Camera and cube item buffers pack the twin bit into the top bit of the vertex's patch id.
@@ -356,6 +365,7 @@ pub fn wgsl_constants() -> String {
     format!(
         "const PATCH_TWIN: u32 = {PATCH_TWIN}u;\n\
          const PATCH_FIRST_SHOT_LIGHT: u32 = {PATCH_FIRST_SHOT_LIGHT}u;\n\
+         const PATCH_SMOOTH_EDGE: u32 = {PATCH_SMOOTH_EDGE}u;\n\
          const NO_PATCH: u32 = {NO_PATCH}u;\n\
          const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\

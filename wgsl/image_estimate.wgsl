@@ -94,6 +94,10 @@ const SEGMENT_EPSILON: f32 = 1e-4;
 // (`blocks`): cos 30 degrees.
 const NEIGHBOUR_COS: f32 = 0.866;
 
+// How far past a patch's smooth edge, in texels of the sun's view, its surface is taken to go
+// on (`crosses_surface`).
+const CONTINUATION_TEXELS: f32 = 1.5;
+
 // Whether the segment y + t (x - y), SEGMENT_EPSILON < t < 1 - SEGMENT_EPSILON, crosses
 // patch k (Moller-Trumbore, either side).
 fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
@@ -131,7 +135,7 @@ fn atlas_id(atlas: u32, at: vec2<i32>) -> u32 {
 // Whether the surface `id` (patch index + 1) of a window texel lies on the segment from y to x,
 // x on patch j. With `by_plane` (a directional light's parallel view), whether the segment
 // crosses that surface's plane: see `visible`.
-fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool) -> bool {
+fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f32) -> bool {
     if (id == NO_PATCH || id - 1u == j || id > params.patch_count) {
         return false;
     }
@@ -153,7 +157,51 @@ fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool) -> bool {
         && abs(dot(plane.xyz, patches_at(j).normal.xyz)) >= NEIGHBOUR_COS) {
         return false;
     }
-    return by_plane || segment_hits(id - 1u, y, x);
+    if (by_plane) {
+        return crosses_surface(id - 1u, y, x, texel);
+    }
+    return segment_hits(id - 1u, y, x);
+}
+
+// For a sun (`visible`), given that the segment from y to x crosses the plane of patch k:
+// whether it crosses k's surface there. Inside the triangle it does. Beyond an edge that
+// continues into a neighbour of about the same plane (PATCH_SMOOTH_EDGE, set by the host)
+// the surface goes on, and a neighbour the sun's texels did not show may hold the crossing:
+// it is taken to (a tessellated roof or wall, whose mesh vertices poke between the texel
+// centres, does not leak). Beyond an outline or a crease it does not: the segment passes
+// beside the surface there. Until 2026-11-26 every crossing of the plane blocked, and the
+// floor within about a texel of a window's sunlit patch fell into shade (sun_room: the
+// outline's pixels held about half of the image's squared error against Mitsuba).
+fn crosses_surface(k: u32, y: vec3<f32>, x: vec3<f32>, texel: f32) -> bool {
+    let a = patches_at(k).v0.xyz;
+    let e1 = patches_at(k).v1.xyz - a;
+    let e2 = patches_at(k).v2.xyz - a;
+    let dir = x - y;
+    let p = cross(dir, e2);
+    let det = dot(e1, p);
+    if (abs(det) < 1e-30) {
+        return false;
+    }
+    let inv = 1.0 / det;
+    let s = y - a;
+    let u = dot(s, p) * inv;
+    let v = dot(dir, cross(s, e1)) * inv;
+    let w = 1.0 - u - v;
+    if (min(w, min(u, v)) >= 0.0) {
+        return true;
+    }
+    // The barycentric weight of vertex i falls below 0 beyond the edge opposite it, -weight
+    // times the triangle's height over that edge from it. A neighbour the texels missed is
+    // thinner than about a texel where the segment meets it, so the surface is taken to go
+    // on only that far: further out, the texels would have shown what lies there (and a
+    // triangle whose corner touches the outline no longer carries its plane past it).
+    let continues = patches_at(k).flags / PATCH_SMOOTH_EDGE;
+    let twice_area = 2.0 * patches_at(k).v0.w;
+    let n = patches_at(k).normal.xyz;
+    let reach = CONTINUATION_TEXELS * texel / max(abs(dot(n, normalize(dir))), 0.25);
+    let beyond = -vec3<f32>(w * twice_area / length(e2 - e1), u * twice_area / length(e2), v * twice_area / length(e1));
+    let ok = vec3<bool>((continues & 1u) != 0u, (continues & 2u) != 0u, (continues & 4u) != 0u);
+    return all((beyond <= vec3<f32>(0.0)) | (ok & (beyond <= vec3<f32>(reach))));
 }
 
 // The face of a window that holds direction w (from the light toward x): the one whose
@@ -206,13 +254,12 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
 //
 // A directional light's window is one parallel view (VIEW_ORTHOGRAPHIC) and y is the point
 // of its plane behind the scene from which the light reaches x: the texels are those around
-// x's own projection. There the segment is tested against the planes of the surfaces seen,
-// not their triangles: a sun lights rooms through their tessellated walls and roofs, whose
-// triangle corners poke between texel centres everywhere (with triangles, light leaked
-// through at every mesh vertex: tests/lights.rs test08). A plane the segment crosses blocks;
-// as with a depth map, this may darken x within about one texel of an occluder's outline
-// (where the plane of the occluder seen beside it reaches past its edge), and is exact
-// elsewhere.
+// x's own projection. There a triangle test alone would not do: a sun lights rooms through
+// their tessellated walls and roofs, whose triangle corners poke between texel centres
+// everywhere (with triangles, light leaked through at every mesh vertex: tests/lights.rs
+// test08). So a surface seen there blocks where the segment crosses its plane inside its
+// triangle or a little past an edge it shares with a neighbour of its plane
+// (`crosses_surface`), and not past its outline.
 fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     let w = x - y;
     let f = window_face(w, first, count);
@@ -245,7 +292,7 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
                 let at = clamp(centre + vec2<i32>(dx, dy), vec2<i32>(0), last);
-                if (blocks(atlas_id(tile.w, origin + at), j, y, x, false)) {
+                if (blocks(atlas_id(tile.w, origin + at), j, y, x, false, 0.0)) {
                     return false;
                 }
             }
@@ -261,16 +308,18 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     let b = atlas_id(tile.w, origin + vec2<i32>(hi.x, lo.y));
     let c = atlas_id(tile.w, origin + vec2<i32>(lo.x, hi.y));
     let d = atlas_id(tile.w, origin + hi);
-    if (blocks(a, j, y, x, true)) {
+    // A texel's side in the scene (the view is orthographic, 2 right.w across).
+    let texel = 2.0 * right.w / f32(side);
+    if (blocks(a, j, y, x, true, texel)) {
         return false;
     }
-    if (b != a && blocks(b, j, y, x, true)) {
+    if (b != a && blocks(b, j, y, x, true, texel)) {
         return false;
     }
-    if (c != a && c != b && blocks(c, j, y, x, true)) {
+    if (c != a && c != b && blocks(c, j, y, x, true, texel)) {
         return false;
     }
-    return d == a || d == b || d == c || !blocks(d, j, y, x, true);
+    return d == a || d == b || d == c || !blocks(d, j, y, x, true, texel);
 }
 
 // Multiple importance sampling of an emitting shape's light (docs/ALGORITHM.md 6): the

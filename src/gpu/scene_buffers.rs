@@ -243,11 +243,14 @@ fn v4(v: DVec3, w: f64) -> [f32; 4] {
 /// or plain emitters.
 pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<GpuPatch> {
     let black = scene.materials.len() as u32;
+    let has_sun = scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Directional { .. }));
+    let smooth = if has_sun { smooth_edges(patches) } else { Vec::new() };
     patches
         .patches
         .iter()
-        .map(|p| {
-            let mut flags = 0;
+        .enumerate()
+        .map(|(i, p)| {
+            let mut flags = smooth.get(i).copied().unwrap_or(0);
             if p.twin {
                 flags |= PATCH_TWIN;
             }
@@ -267,6 +270,47 @@ pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<Gp
             }
         })
         .collect()
+}
+
+/// `PATCH_SMOOTH_EDGE` bits of every patch: for each edge (opposite vertex k), whether
+/// another patch has the same two corners (as f32, what the GPU sees) and a plane within
+/// `SMOOTH_EDGE_COS` of this one's, either way round. A two-sided surface's two sides (the
+/// same three corners) are no neighbours of each other. Edges are matched by sorting (about
+/// 32 bytes an edge, freed on return), not hashing, to keep a large scene's peak low.
+pub fn smooth_edges(patches: &Patches) -> Vec<u32> {
+    let key = |v: DVec3| [v.x as f32, v.y as f32, v.z as f32].map(f32::to_bits);
+    let corners = |i: u32| {
+        let mut c = patches.patches[i as usize].vertices.map(key);
+        c.sort_unstable();
+        c
+    };
+    // (the edge's corners in order, patch, k) of every patch's three edges.
+    let mut edges: Vec<([[u32; 3]; 2], u32, u8)> = Vec::with_capacity(3 * patches.patches.len());
+    for (i, p) in patches.patches.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (key(p.vertices[(k + 1) % 3]), key(p.vertices[(k + 2) % 3]));
+            edges.push(([a.min(b), a.max(b)], i as u32, k as u8));
+        }
+    }
+    edges.sort_unstable_by_key(|e| e.0);
+    let mut flags = vec![0u32; patches.patches.len()];
+    for run in edges.chunk_by(|x, y| x.0 == y.0) {
+        if run.len() < 2 {
+            continue;
+        }
+        for &(_, i, k) in run {
+            let n = patches.patches[i as usize].normal;
+            let smooth = run.iter().any(|&(_, other, _)| {
+                other != i
+                    && patches.patches[other as usize].normal.dot(n).abs() >= SMOOTH_EDGE_COS
+                    && corners(other) != corners(i)
+            });
+            if smooth {
+                flags[i as usize] |= PATCH_SMOOTH_EDGE << k;
+            }
+        }
+    }
+    flags
 }
 
 /// T A_t for a patch of a first-shot emitting shape: the area that a direct-light pass's
@@ -467,5 +511,87 @@ impl FirstShotTable {
             ),
             entry_count: 0,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A floor quad cut into patches, a box standing on it and a two-sided square: which
+    /// edges `smooth_edges` finds smooth.
+    #[test]
+    fn smooth_edges_are_the_shared_ones_of_one_plane() {
+        let text = r#"
+format = 1
+[camera]
+position = [0.0, 3.0, -3.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y = 50.0
+width = 8
+height = 8
+[settings]
+patch_size = 0.5
+[materials.grey]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+[[shapes]]
+type = "quad"
+vertices = [[-1.0, 0.0, -1.0], [-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0]]
+material = "grey"
+[[shapes]]
+type = "box"
+min = [3.0, 0.0, 0.0]
+max = [4.0, 1.0, 1.0]
+material = "grey"
+[[shapes]]
+type = "quad"
+vertices = [[-1.0, 2.0, -1.0], [1.0, 2.0, -1.0], [1.0, 2.0, 1.0], [-1.0, 2.0, 1.0]]
+material = "grey"
+two_sided = true
+[[lights]]
+type = "directional"
+direction = [0.0, -1.0, 0.2]
+irradiance = [1.0, 1.0, 1.0]
+"#;
+        let scene = crate::scene::load::load_str(text, std::path::Path::new("memory/smooth.toml")).unwrap();
+        let patches = crate::scene::tessellate(&scene, 0.5).unwrap();
+        let flags = smooth_edges(&patches);
+        // Both ends on the side |c| = 1 of a square of side 2 centred on the axis.
+        let on_side = |a: f64, b: f64| (a.abs() - 1.0).abs() < 1e-9 && (a - b).abs() < 1e-9;
+        let (mut floor_inner, mut floor_outline, mut box_edges, mut twins) = (0, 0, 0, 0);
+        for (p, &f) in patches.patches.iter().zip(&flags) {
+            for k in 0..3 {
+                let (a, b) = (p.vertices[(k + 1) % 3], p.vertices[(k + 2) % 3]);
+                let smooth = f & (PATCH_SMOOTH_EDGE << k) != 0;
+                let mid = (a + b) / 2.0;
+                if mid.x.abs() <= 1.0 && mid.y == 0.0 {
+                    // The floor: its outline (|x| or |z| = 1 along the edge) is no neighbour's.
+                    let outline = on_side(a.x, b.x) || on_side(a.z, b.z);
+                    assert_eq!(smooth, !outline, "floor edge {a} - {b}");
+                    if outline { floor_outline += 1 } else { floor_inner += 1 }
+                } else if mid.x >= 3.0 {
+                    // The box: a 90-degree edge between two faces is a crease.
+                    let on_box_edge = [mid.x, mid.y, mid.z]
+                        .iter()
+                        .zip([3.0, 0.0, 0.0])
+                        .filter(|(m, lo)| (**m - *lo).abs() < 1e-9 || (**m - *lo - 1.0).abs() < 1e-9)
+                        .count()
+                        >= 2;
+                    if on_box_edge {
+                        assert!(!smooth, "box edge {a} - {b}");
+                        box_edges += 1;
+                    }
+                } else if mid.y == 2.0 && p.twin {
+                    // Each side of a two-sided surface has the other side's neighbours, not the
+                    // other side itself.
+                    twins += 1;
+                    let outline = on_side(a.x, b.x) || on_side(a.z, b.z);
+                    assert_eq!(smooth, !outline, "two-sided edge {a} - {b}");
+                }
+            }
+        }
+        assert!(floor_inner > 0 && floor_outline > 0 && box_edges > 0 && twins > 0);
     }
 }
