@@ -38,7 +38,9 @@ const DEVICE_BYTES_PER_PIXEL: u64 = 2 * 32 + 8 + 8;
 /// Host bytes per pixel of a view: the image sum read back (32) and the image (rgba f32).
 const HOST_BYTES_PER_PIXEL: u64 = 32 + 16;
 /// Host bytes per patch while the scene is uploaded, besides the tessellated patch: the
-/// patch table and the triangles built for the upload, and wgpu's staging copy of each.
+/// patch table and the triangles built for the upload, and wgpu's staging copy of each. (In a
+/// scene with a sun, `scene_buffers::smooth_edges` takes about 100 bytes a patch before them,
+/// and returns it.)
 const UPLOAD_BYTES_PER_PATCH: u64 = 2 * (96 + 3 * size_of::<RasterVertex>() as u64);
 /// The process without a scene: code, the adapter's own allocations, the shaders (a 64 x 64
 /// render of the Cornell box peaks at 160 MiB resident on lavapipe).
