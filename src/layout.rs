@@ -17,9 +17,10 @@ pub const PATCH_FIRST_SHOT_LIGHT: u32 = 2;
 /// edge is an outline or a crease (`scene_buffers::smooth_edges`). Set only in scenes with a
 /// directional light.
 pub const PATCH_SMOOTH_EDGE: u32 = 4;
-/// The cosine between two patches' planes within which a shared edge is smooth: 30 degrees,
-/// as WGSL's NEIGHBOUR_COS (image_estimate.wgsl).
-pub const SMOOTH_EDGE_COS: f64 = 0.866;
+/// The cosine between two patches' planes within which they are taken for one (possibly
+/// curved) surface: 30 degrees. The host's smooth edges use it, and WGSL's shadow test for
+/// the planes near x that are x's neighbours (image_estimate.wgsl, `blocks`).
+pub const SMOOTH_EDGE_COS: f32 = 0.866;
 /// Item buffers store patch index + 1; this value means "no surface".
 pub const NO_PATCH: u32 = 0;
 /// Camera and cube item buffers pack the twin bit into the top bit of the vertex's patch id.
@@ -387,8 +388,10 @@ pub fn wgsl_constants() -> String {
          const PREFIX_SUM_PER_THREAD: u32 = {PREFIX_SUM_PER_THREAD}u;\n\
          const GLOSSY_HISTORY: u32 = {GLOSSY_HISTORY}u;\n\
          const PI: f32 = {pi:?};\n\
-         const FIXED_POINT_SCALE: f32 = {scale:?};\n",
+         const FIXED_POINT_SCALE: f32 = {scale:?};\n\
+         const SMOOTH_EDGE_COS: f32 = {smooth:?};\n",
         pi = std::f32::consts::PI,
-        scale = FIXED_POINT_SCALE
+        scale = FIXED_POINT_SCALE,
+        smooth = SMOOTH_EDGE_COS
     )
 }

@@ -89,11 +89,6 @@ fn has_other_windows() -> bool {
 // the light and on x's own surface.
 const SEGMENT_EPSILON: f32 = 1e-4;
 
-// The cosine between x's plane and a surface's within which that surface, through x, is taken
-// for x's neighbour on the same (curved) surface rather than a wall meeting x's at a crease
-// (`blocks`): cos 30 degrees.
-const NEIGHBOUR_COS: f32 = 0.866;
-
 // How far past a patch's smooth edge, in texels of the sun's view, its surface is taken to go
 // on (`crosses_surface`).
 const CONTINUATION_TEXELS: f32 = 1.5;
@@ -141,7 +136,7 @@ fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f3
     }
     // Most surfaces around the direction cannot cross the segment: those whose plane has y
     // and x on one side, and those whose plane holds x: x's neighbours on its own surface
-    // (in its plane, or within NEIGHBOUR_COS of it on a curved mesh; either side, so a
+    // (in its plane, or within SMOOTH_EDGE_COS of it on a curved mesh; either side, so a
     // two-sided surface's twin too). One load of the plane rules them out before the
     // triangle test's three. A plane near x at a steeper angle is another surface meeting
     // x's at a crease, and it still blocks: a sun outside the room lit the creases of its
@@ -154,7 +149,7 @@ fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f3
         return false;
     }
     if (abs(side_x) <= SEGMENT_EPSILON * length(x - y)
-        && abs(dot(plane.xyz, patches_at(j).normal.xyz)) >= NEIGHBOUR_COS) {
+        && abs(dot(plane.xyz, patches_at(j).normal.xyz)) >= SMOOTH_EDGE_COS) {
         return false;
     }
     if (by_plane) {

@@ -302,7 +302,7 @@ pub fn smooth_edges(patches: &Patches) -> Vec<u32> {
             let n = patches.patches[i as usize].normal;
             let smooth = run.iter().any(|&(_, other, _)| {
                 other != i
-                    && patches.patches[other as usize].normal.dot(n).abs() >= SMOOTH_EDGE_COS
+                    && patches.patches[other as usize].normal.dot(n).abs() >= SMOOTH_EDGE_COS as f64
                     && corners(other) != corners(i)
             });
             if smooth {
