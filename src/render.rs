@@ -740,15 +740,15 @@ impl<'a> Renderer<'a> {
         let mis = gathers && options.first_shot && !patches.emitters.is_empty();
         // The views after the first share its kernels and pipelines (about 80 ms of pipeline
         // builds a view on lavapipe): only their buffers, textures and bind groups are new.
+        let gather = iteration.as_ref().map(|i| &i.gather);
+        let stride = crate::iteration::pixel_stride(per_step);
         let mut views: Vec<ViewImage> = Vec::new();
         for NamedCamera { name, camera } in options.views(scene) {
             let like = views.first();
             let item_buffer = CameraItemBuffer::new(device, camera.width, camera.height, like.map(|v| &v.item_buffer));
-            let gather = iteration.as_ref().map(|i| &i.gather);
             let band_rows = options
                 .image_band_rows
                 .unwrap_or_else(|| crate::stages::image_estimate::band_rows(&device.limits(), camera.width));
-            let stride = crate::iteration::pixel_stride(per_step);
             let estimate = ImageEstimate::new(
                 device,
                 &buffers,
