@@ -306,6 +306,8 @@ pub struct Iteration {
     pub capacity: u32,
     pub resolution: u32,
     pub gather: GatherBuffers,
+    /// Whether the reflection also writes Lfs_j for the image (`new`).
+    image_first_bounce_per_point: bool,
     arrays: StepArrays,
     _owned: [wgpu::Buffer; 3],
 }
@@ -323,7 +325,16 @@ struct StepArrays {
 }
 
 impl Iteration {
-    pub fn new(ctx: &Context, scene: &SceneBuffers, resolution: u32, capacity: u64) -> Result<Self> {
+    /// `image_first_bounce_per_point`: the image's gather evaluates near senders' first
+    /// reflection of the lights per point (`render::first_bounce_per_point`), so it reads
+    /// each patch's Lfs_j as well (`ReflectOutputs::writes_first_bounce`).
+    pub fn new(
+        ctx: &Context,
+        scene: &SceneBuffers,
+        resolution: u32,
+        capacity: u64,
+        image_first_bounce_per_point: bool,
+    ) -> Result<Self> {
         let device = &ctx.device;
         let n = scene.patch_count as u64;
         let none = wgpu::BufferUsages::empty();
@@ -334,7 +345,7 @@ impl Iteration {
             image_mean_radiance: zeroed(device, "firstshot.iteration.image_mean_radiance", OUTGOING, n, pages, none),
             sums: zeroed(device, "firstshot.iteration.sums", TRANSFER_SUMS, n, pages, none),
         };
-        Self::with_arrays(ctx, scene, arrays, resolution, capacity, None)
+        Self::with_arrays(ctx, scene, arrays, resolution, capacity, image_first_bounce_per_point, None)
     }
 
     /// An iteration at `resolution` with room for `capacity` fragments that shares this
@@ -342,7 +353,8 @@ impl Iteration {
     /// new: building the pipelines again took about 45 ms on lavapipe): the coarse burn-in
     /// (`coarse_burn_in`), or this resolution with a larger fragment list after an overflow.
     pub fn resized(&self, ctx: &Context, scene: &SceneBuffers, resolution: u32, capacity: u64) -> Result<Self> {
-        Self::with_arrays(ctx, scene, self.arrays.clone(), resolution, capacity, Some(self))
+        let per_point = self.image_first_bounce_per_point;
+        Self::with_arrays(ctx, scene, self.arrays.clone(), resolution, capacity, per_point, Some(self))
     }
 
     fn with_arrays(
@@ -351,6 +363,7 @@ impl Iteration {
         arrays: StepArrays,
         resolution: u32,
         capacity: u64,
+        image_first_bounce_per_point: bool,
         like: Option<&Iteration>,
     ) -> Result<Self> {
         let device = &ctx.device;
@@ -404,7 +417,12 @@ impl Iteration {
                 scene,
                 &bundle,
                 &max_bits,
-                ReflectOutputs { outgoing, image_outgoing, image_mean_radiance },
+                ReflectOutputs {
+                    outgoing,
+                    image_outgoing,
+                    image_mean_radiance,
+                    writes_first_bounce: image_first_bounce_per_point,
+                },
                 like.map(|l| &l.reflect),
             ),
             visibility: BundleVisibility::new(
@@ -463,6 +481,7 @@ impl Iteration {
                 image_outgoing: image_outgoing.pages.clone(),
                 image_mean_radiance: image_mean_radiance.pages.clone(),
             },
+            image_first_bounce_per_point,
             bundle,
             step_bundles,
             counts,

@@ -131,6 +131,11 @@ pub(crate) struct RenderArgs {
     /// halved for them (as many lines a step).
     #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = parse_bundles_per_step)]
     bundles_per_step: Option<BundlesPerStep>,
+    /// Take each surface's first reflection of the lights, as the image gathers it from that
+    /// surface, at the patch level (the paper's method) instead of at the point the gather
+    /// meets it (the default, unless a light is an emitting shape).
+    #[arg(long)]
+    patch_first_bounce: bool,
     /// The camera to render, by name: "camera" for the [camera] table, or a [[cameras]]
     /// entry's name (default: the first of the scene's cameras).
     #[arg(long, value_name = "NAME")]
@@ -458,6 +463,7 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     }
     options.burn_in = args.burn_in.or(options.burn_in);
     options.memory_limit = args.memory_limit.map(|mib| mib << 20);
+    options.patch_first_bounce |= args.patch_first_bounce;
     if let Some(b) = args.bundles_per_step {
         options.bundles_per_step = b.0;
     }

@@ -33,8 +33,8 @@ const BYTES_PER_LINE: u64 = 16 + 8 * crate::layout::LINE_BUCKET as u64;
 const BYTES_PER_FRAGMENT: u64 = 28;
 /// GPU bytes per pixel of a view: the image sum (two halves of vec4<f32>) and its copy kept
 /// to redo a batch, the camera item buffer (patch id and depth, 4 bytes each) and the
-/// gather's list of edge pixels (8).
-const DEVICE_BYTES_PER_PIXEL: u64 = 2 * 32 + 8 + 8;
+/// gather's lists of edge pixels and of senders' first bounces (8 each).
+const DEVICE_BYTES_PER_PIXEL: u64 = 2 * 32 + 8 + 8 + 8;
 /// Host bytes per pixel of a view: the image sum read back (32) and the image (rgba f32).
 const HOST_BYTES_PER_PIXEL: u64 = 32 + 16;
 /// Host bytes per patch while the scene is uploaded, besides the tessellated patch: the

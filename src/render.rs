@@ -101,6 +101,10 @@ pub struct RenderOptions {
     /// 2 x 2 block gathers through its own; `None`: chosen from the patches and the views
     /// (`iteration::auto_bundles_per_step`).
     pub bundles_per_step: Option<u32>,
+    /// The gather takes every sender's first reflection of the lights at the patch level
+    /// (the paper's Lfs_j at the patch's centre) instead of per point
+    /// (`first_bounce_per_point`, docs/ALGORITHM.md 6).
+    pub patch_first_bounce: bool,
 }
 
 impl RenderOptions {
@@ -126,6 +130,7 @@ impl RenderOptions {
             window_steps: DEFAULT_WINDOW_STEPS,
             cameras: Vec::new(),
             bundles_per_step: scene.settings.bundles_per_step,
+            patch_first_bounce: false,
         }
     }
 
@@ -173,6 +178,17 @@ impl RenderOptions {
         let camera = Camera { width: self.width, height: self.height, ..scene.camera };
         vec![NamedCamera { name: "camera".into(), camera }]
     }
+}
+
+/// Whether the image's gather evaluates a near sender's first reflection of the first-shot
+/// lights at the point it meets it, instead of taking the sender's patch-level Lfs
+/// (docs/ALGORITHM.md 6, "Near senders' first bounce per point"): with first shot, unless an
+/// emitting shape is among the lights. Such a shape can meet the surfaces it lights, and a
+/// point next to it would see its D without bound (at x the gather shares that light by
+/// multiple importance sampling; at the sender's point nothing would), so those scenes keep
+/// the patch level.
+pub fn first_bounce_per_point(options: &RenderOptions, patches: &Patches) -> bool {
+    options.first_shot && patches.emitters.is_empty() && !options.patch_first_bounce
 }
 
 /// Burn-in steps for `scene`: the state's missing share of further bounces falls as a^k with
@@ -668,6 +684,9 @@ pub struct Renderer<'a> {
     direct_due: bool,
     /// Whether this pass renders the area lights' windows at new points.
     windows_due: bool,
+    /// Whether the gathers evaluate near senders' first bounce per point
+    /// (`first_bounce_per_point`): they read the area lights' windows on every image step.
+    first_bounce_per_point: bool,
     first_shot: Option<FirstShotStats>,
     /// Near distance of the camera's reversed-z projection.
     near: f64,
@@ -719,12 +738,13 @@ impl<'a> Renderer<'a> {
             Some(stats)
         };
         let direct = DirectLights::new(ctx, scene, patches, &buffers, options);
+        let per_point = first_bounce_per_point(options, patches) && direct.count() > 0;
         let iteration = if options.iterations == 0 {
             None
         } else {
             let capacity =
                 initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, bundle_resolution);
-            Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity)?)
+            Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity, per_point)?)
         };
         let burn_in = burn_in_steps(scene, options, per_step);
         let coarse = match (&iteration, crate::iteration::coarse_burn_in(bundle_resolution, burn_in, per_step)) {
@@ -757,6 +777,7 @@ impl<'a> Renderer<'a> {
                 gather,
                 band_rows,
                 stride,
+                per_point && gathers,
                 like.map(|v| &v.estimate),
             );
             estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);
@@ -779,6 +800,7 @@ impl<'a> Renderer<'a> {
             image_start: burn_in,
             direct_due: true,
             windows_due: true,
+            first_bounce_per_point: per_point && gathers,
             first_shot,
             patch_count: patches.patches.len(),
             light_samples: patches.samples.len(),
@@ -850,8 +872,13 @@ impl<'a> Renderer<'a> {
             let jitter = crate::rng::stratified_pixel_sample(self.options.seed, i as u64, u);
             self.write_camera([jitter[0] as f32, jitter[1] as f32]);
             self.direct_due = direct_light_due(i, &self.options);
-            if self.direct_due {
-                let pass = direct_light_estimates(i, &self.options) as u64;
+            // The area lights' windows of the step's pass: new points on a step that estimates
+            // the direct light; on the others, the last such step's, which the near senders'
+            // first bounce reads (rendered again where a resumed run or a redone batch has
+            // others in place, so that the image does not depend on either).
+            self.windows_due = false;
+            if self.direct_due || self.first_bounce_per_point {
+                let pass = direct_light_estimates(i + 1, &self.options) as u64 - 1;
                 self.windows_due = self.direct.prepare_pass(queue, pass);
             }
         }
@@ -930,11 +957,12 @@ impl<'a> Renderer<'a> {
     /// The stages that add one estimate of every pixel of every view to its image sum: per
     /// view the camera item buffer, then, if `direct`, the estimate of Le + D, then, if
     /// `gather`, the estimate of G through this step's bundle. The area lights' windows at
-    /// this pass's points, which every view's Le + D reads, are rendered once, after the
-    /// first view's item buffer.
+    /// this pass's points, which every view's Le + D reads (and its gathers, for the near
+    /// senders' first bounce), are rendered once when due, after the first view's item
+    /// buffer.
     fn image_stages(&self, direct: bool, gather: bool) -> Vec<Stage<'_>> {
         let (buffers, lights) = (&self.buffers, &self.direct);
-        let windows_due = direct && self.windows_due;
+        let windows_due = self.windows_due;
         let mut stages: Vec<Stage<'_>> = Vec::new();
         for (v, view) in self.views.iter().enumerate() {
             let (camera, estimate) = (&view.item_buffer, &view.estimate);
@@ -942,7 +970,7 @@ impl<'a> Renderer<'a> {
                 "camera",
                 Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
             ));
-            if direct && v == 0 {
+            if (direct || windows_due) && v == 0 {
                 stages.push((
                     "light_windows",
                     Box::new(move |e: &mut wgpu::CommandEncoder| {

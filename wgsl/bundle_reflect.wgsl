@@ -4,8 +4,9 @@
 // glossy sum over the h <= GLOSSY_HISTORY + 1 latest J_j with their directions), with Le
 // left out for first-shot lights (their first reflection replaces them); the same with the
 // mean of K_j over the image steps in place of K_j, which the image gathers
-// (`image_outgoing`, docs/ALGORITHM.md 6); and the largest |O| of the step (for the
-// fixed-point scale of the transfer).
+// (`image_outgoing`, docs/ALGORITHM.md 6); where the image evaluates near senders' first
+// bounce per point, Lfs_j alone (`pack_first_bounce`); and the largest |O| of the step (for
+// the fixed-point scale of the transfer).
 //
 // Compute, one invocation per patch (2D dispatch past 65535 workgroups), the only writer
 // of its `outgoing` (rgb O_j, w s_j). `max_bits` takes the largest O channel by its bits
@@ -22,6 +23,35 @@
 @group(0) @binding(5) var<storage, read_write> max_bits: atomic<u32>;
 @group(0) @binding(6) var<storage, read_write> image_outgoing: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> image_mean_radiance: array<vec4<f32>>;
+
+// True where the image's gather evaluates a near sender's first reflection of the
+// first-shot lights per point (image_estimate's FIRST_BOUNCE_PER_POINT): it then needs the
+// patch-level Lfs_j that image_outgoing holds, to take it out. Lfs_j rides in the w slots of
+// image_outgoing and image_mean_radiance, which nothing else reads (`pack_first_bounce`):
+// an array of its own took two more storage bindings a page, past lavapipe's 32.
+override IMAGE_FIRST_BOUNCE: bool = false;
+
+// Lfs (non-negative) as two floats: its largest channel exactly, and, as an integer below
+// 2^24 (exact in f32), which channel that is (2 bits) and the other two in channel order as
+// 11-bit fractions of it, rounded: within 1 / 4094 of the largest channel.
+// `unpack_first_bounce` in wgsl/image_estimate.wgsl reads it.
+fn pack_first_bounce(l: vec3<f32>) -> vec2<f32> {
+    let top = max(l.r, max(l.g, l.b));
+    if (top <= 0.0) {
+        return vec2<f32>(0.0);
+    }
+    var which = 2u;
+    var others = l.rg;
+    if (l.r == top) {
+        which = 0u;
+        others = l.gb;
+    } else if (l.g == top) {
+        which = 1u;
+        others = l.rb;
+    }
+    let q = vec2<u32>(round(clamp(others / top, vec2<f32>(0.0), vec2<f32>(1.0)) * 2047.0));
+    return vec2<f32>(top, f32((which << 22u) | (q.x << 11u) | q.y));
+}
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -44,7 +74,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     let m = materials[p.material];
     let c = patch_centre(p);
-    o += first_shot_radiance(j, c, n, m, w_out);
+    let first_bounce = first_shot_radiance(j, c, n, m, w_out);
+    o += first_bounce;
     // What the image gathers from j: its diffuse reflection of the mean J of the image steps
     // so far (a direction-free estimate with none of the chain's step-to-step noise).
     var image_o = o;
@@ -88,10 +119,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         image_o += 2.0 * m.diffuse.rgb * mean + glossy;
     }
     outgoing_set(j, vec4<f32>(o, side));
-    image_outgoing_set(j, vec4<f32>(image_o, side));
+    var packed = vec2<f32>(side, 0.0);
+    if (IMAGE_FIRST_BOUNCE) {
+        packed = pack_first_bounce(first_bounce);
+    }
+    image_outgoing_set(j, vec4<f32>(image_o, packed.x));
     // Lbar_j as it stands before this step's d (finalize updates it with this step's J):
     // the gather's control variate at j's own pixels.
-    image_mean_radiance_set(j, vec4<f32>(mean_radiance, 0.0));
+    image_mean_radiance_set(j, vec4<f32>(mean_radiance, packed.y));
     let largest = abs(o);
     atomicMax(&max_bits, bitcast<u32>(max(largest.r, max(largest.g, largest.b))));
 }

@@ -42,6 +42,7 @@
 @group(0) @binding(5) var<storage, read_write> image_sum: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read_write> edges: array<atomic<u32>>;
 @group(0) @binding(7) var<storage, read> glossy_albedo: array<f32>;
+@group(0) @binding(8) var<storage, read_write> near_senders: array<atomic<u32>>;
 @group(1) @binding(0) var<storage, read> lights: array<DirectLight>;
 @group(1) @binding(1) var<storage, read> faces: array<WindowFace>;
 @group(1) @binding(2) var kept_atlas: texture_2d<u32>;
@@ -70,6 +71,11 @@ override WINDOW_FACE_COUNTS: u32 = 0xffffffffu;
 // parameter: on lavapipe the gather reading the parameter (and the environment) ran up to
 // twice as long.
 override SEEN_IN_GATHER: bool = false;
+
+// True where the gather evaluates a near sender's first reflection of the first-shot lights
+// at the point x's ray meets it (`gather_first_bounce`); the host sets it where no light is an
+// emitting shape (`render::first_bounce_per_point`).
+override FIRST_BOUNCE_PER_POINT: bool = false;
 
 fn has_light(kind: u32) -> bool {
     return (LIGHT_KINDS & (1u << kind)) != 0u;
@@ -255,7 +261,7 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
 // test08). So a surface seen there blocks where the segment crosses its plane inside its
 // triangle or a little past an edge it shares with a neighbour of its plane
 // (`crosses_surface`), and not past its outline.
-fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
+fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>, wide: bool) -> bool {
     let w = x - y;
     let f = window_face(w, first, count);
     let z = dot(w, faces[f].view.forward.xyz);
@@ -283,9 +289,12 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
         // missed a triangle whose corner pokes between them without covering a centre: the
         // Sierpinski scene's direct light was 0.81 % off Mitsuba's, 93 % of it too bright;
         // 0.59 % with 3 x 3, 0.55 % with 4 x 4, for about 8 % more time per direct pass.
+        // The first bounce at a sender's point (`wide` false) tests the texel alone, as the
+        // first shot's own item buffers count a patch by texel centres.
         let centre = vec2<i32>(floor(pixel));
-        for (var dy = -1; dy <= 1; dy++) {
-            for (var dx = -1; dx <= 1; dx++) {
+        let reach = select(0, 1, wide);
+        for (var dy = -reach; dy <= reach; dy++) {
+            for (var dx = -reach; dx <= reach; dx++) {
                 let at = clamp(centre + vec2<i32>(dx, dy), vec2<i32>(0), last);
                 if (blocks(atlas_id(tile.w, origin + at), j, y, x, false, 0.0)) {
                     return false;
@@ -345,7 +354,7 @@ fn emitted_share(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
 }
 
 // D(x, w_out): every light's direct radiance reflected at x on patch j toward w_out.
-fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
+fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>, wide: bool) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
     for (var i = 0u; i < params.light_count; i++) {
         let kind = lights[i].kind;
@@ -382,11 +391,66 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
                 g *= light_share(r2, cos_l, lights[i].normal.w);
             }
         }
-        if (g > 0.0 && visible(y, lights[i].first_face, lights[i].faces, j, x)) {
+        if (g > 0.0 && visible(y, lights[i].first_face, lights[i].faces, j, x, wide)) {
             sum += lights[i].strength.rgb * g * brdf(m, n, w_in, w_out);
         }
     }
     return sum;
+}
+
+// The point y where x's ray toward `toward` meets the plane of sender m (m's front faces x)
+// and its distance t from x, or, where the ray meets that plane at a grazing angle or not
+// ahead of x (the line and the ray on two sides of an edge), m's centre with t = 0.
+fn sender_point(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec4<f32> {
+    let plane = patches_at(m).normal;
+    let t = (plane.w - dot(plane.xyz, x)) / dot(plane.xyz, toward);
+    if (-dot(plane.xyz, toward) > 1e-3 && t > 0.0) {
+        return vec4<f32>(x + t * toward, t);
+    }
+    return vec4<f32>(patch_centre(patches_at(m)), 0.0);
+}
+
+// A sender is near where x's ray meets it within NEAR_SENDER of its patch's width
+// (sqrt(area)). There the patch-level Lfs_m, which averages the light over m (the first
+// shot's visibility is m's share seen from each light sample, its geometry m's centre's),
+// differs from the light at the point x sees by about that patch's own variation: beside a
+// contact or a crease x gathers from the few points of m next to it (a block's foot on a
+// floor it shades; a wall's crease where the neighbour's mean outshines the corner). A far
+// sender fills a small solid angle over which x's weight barely changes, so its mean is what
+// x gathers from it to first order in width / distance.
+const NEAR_SENDER: f32 = 2.0;
+
+// What x receives along `toward` (= s d): `radiance`, what the sender's patch sends the image
+// (`image_outgoing`, with G's share of an emitting shape's light), black or the environment;
+// `decided` false where `own_received` leaves it to `nearest_received`; `sender` the patch
+// id (index + 1) whose front sends it, NO_PATCH if none.
+struct Received {
+    radiance: vec3<f32>,
+    decided: bool,
+    sender: u32,
+}
+
+fn received_from(m: u32, x: vec3<f32>, toward: vec3<f32>) -> Received {
+    return Received(image_outgoing_at(m).rgb + emitted_share(m, x, toward), true, m + 1u);
+}
+
+fn received_const(radiance: vec3<f32>, decided: bool) -> Received {
+    return Received(radiance, decided, NO_PATCH);
+}
+
+// Lists `pixel` for `gather_first_bounce` (near_senders: [0] the count, then pixel and sender
+// id a pair) where the host asks for first bounces per point and x's sender is near.
+fn list_near_sender(received: Received, x: vec3<f32>, toward: vec3<f32>, pixel: u32) {
+    if (!FIRST_BOUNCE_PER_POINT || received.sender == NO_PATCH) {
+        return;
+    }
+    let m = received.sender - 1u;
+    let t = sender_point(m, x, toward).w;
+    if (t * t < NEAR_SENDER * NEAR_SENDER * patches_at(m).v0.w) {
+        let listed = atomicAdd(&near_senders[0], 1u);
+        atomicStore(&near_senders[2u * listed + 1u], pixel);
+        atomicStore(&near_senders[2u * listed + 2u], received.sender);
+    }
 }
 
 // `found`, or fragment k + 1 of the line [begin, end) if it belongs to patch j.
@@ -560,11 +624,11 @@ fn search(line_in: OnLine, x: vec3<f32>, s: f32) -> OnLine {
 }
 
 // What x (on patch j) receives from direction `toward` (= s d) where j's own fragment lies on
-// x's line: rgb the radiance and w = 1; w = 0 where it does not (x near j's edge), which
-// `nearest_received` then decides.
-fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> vec4<f32> {
+// x's line; not `decided` where it does not (x near j's edge), which `nearest_received` then
+// decides.
+fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> Received {
     if (line.outside) {
-        return vec4<f32>(bundle.environment.rgb, 1.0);
+        return received_const(bundle.environment.rgb, true);
     }
     let begin = line.begin;
     let end = line.end;
@@ -585,16 +649,16 @@ fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> vec4<f
         let k = own - 1u;
         let front = (fragments[k].y & FRAGMENT_FRONT_BIT) != 0u;
         if ((front && k + 1u >= end) || (!front && k == begin)) {
-            return vec4<f32>(bundle.environment.rgb, 1.0);
+            return received_const(bundle.environment.rgb, true);
         }
         let other = fragments[select(k - 1u, k + 1u, front)].y;
         if (((other & FRAGMENT_FRONT_BIT) != 0u) != front) {
             let m = other & ~FRAGMENT_FRONT_BIT;
-            return vec4<f32>(image_outgoing_at(m).rgb + emitted_share(m, x, toward), 1.0);
+            return received_from(m, x, toward);
         }
-        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        return received_const(vec3<f32>(0.0), true);
     }
-    return vec4<f32>(0.0);
+    return received_const(vec3<f32>(0.0), false);
 }
 
 // What x receives where j's own fragment is on neither x's line nor the lines beside it
@@ -608,7 +672,7 @@ fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> vec4<f
 // pixels 11-14 %; tests/per_pixel.rs test13). Unrolled: a CPU adapter runs a data-dependent loop over
 // storage many times slower. Only the pixels `gather` lists in `edges` get here: run among
 // the others, this branch made every vector of 8 pixels that held one such pixel pay for it.
-fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLine) -> vec3<f32> {
+fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLine) -> Received {
     let range = vec2<u32>(line.begin, line.end);
     let lo = line.lo;
     let eps = 1e-5 / bundle.centre.w;
@@ -633,7 +697,7 @@ fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLin
     let hit = n.hit;
     if (hit.patch_id != NO_PATCH && dot(patches_at(hit.patch_id - 1u).normal.xyz, toward) < 0.0) {
         let m = hit.patch_id - 1u;
-        return image_outgoing_at(m).rgb + emitted_share(m, x, toward);
+        return received_from(m, x, toward);
     }
     // Failing that, the nearest facing x by the exact distance from x along the ray to its
     // plane. With none, the environment where nothing lies ahead on the line; where only
@@ -642,10 +706,10 @@ fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLin
     // Lbar_j, stands in for it.
     let best = n.plane;
     if (best.patch_id == NO_PATCH) {
-        return select(bundle.environment.rgb, image_mean_radiance_at(j).rgb, n.blocked);
+        return received_const(select(bundle.environment.rgb, image_mean_radiance_at(j).rgb, n.blocked), true);
     }
     let m = best.patch_id - 1u;
-    return image_outgoing_at(m).rgb + emitted_share(m, x, toward);
+    return received_from(m, x, toward);
 }
 
 // The surface point a camera pixel sees in this pass: x on patch j (normal n) with w_out
@@ -702,7 +766,7 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     if (at.kind == SEEN_SURFACE) {
         let m = materials[patches_at(at.j).material];
-        radiance = direct_light(at.j, at.x, at.n, m, at.w_out);
+        radiance = direct_light(at.j, at.x, at.n, m, at.w_out, true);
         if (params.seen_in_gather == 0u) {
             radiance += patches_at(at.j).emission.rgb;
         }
@@ -799,7 +863,7 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         let toward = s * d;
         let line = on_line(at.x, s);
         let received = own_received(at.j, at.x, toward, line);
-        if (received.w == 0.0) {
+        if (!received.decided) {
             // With x's place on its line, so that gather_edges need not search it again.
             let listed = atomicAdd(&edges[0], 1u);
             atomicStore(&edges[2u * listed + 1u], pixel);
@@ -809,17 +873,18 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
             image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 0.0);
             return;
         }
-        radiance += gather_radiance(at, received.rgb, toward);
+        list_near_sender(received, at.x, toward, pixel);
+        radiance += gather_radiance(at, received.radiance, toward);
     }
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
 }
 
-// `own_received` on the line of grid cell `cell` (w = 0 off the grid or where j has no
-// fragment near x's depth there).
-fn beside_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, cell: vec2<i32>) -> vec4<f32> {
+// `own_received` on the line of grid cell `cell` (not decided off the grid or where j has
+// no fragment near x's depth there).
+fn beside_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, cell: vec2<i32>) -> Received {
     let line = line_at(cell);
     if (line.outside) {
-        return vec4<f32>(0.0);
+        return received_const(vec3<f32>(0.0), false);
     }
     return own_received(j, x, toward, search(line, x, s));
 }
@@ -856,18 +921,73 @@ fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>) {
             second = vec2<i32>(side.x, 0);
         }
         var received = beside_received(at.j, at.x, toward, s, base + first);
-        if (received.w == 0.0) {
+        if (!received.decided) {
             received = beside_received(at.j, at.x, toward, s, base + second);
         }
-        if (received.w == 0.0) {
+        if (!received.decided) {
             received = beside_received(at.j, at.x, toward, s, base + side);
         }
-        var incoming = received.rgb;
-        if (received.w == 0.0) {
+        if (!received.decided) {
             var line = line_at(base);
             line.lo = atomicLoad(&edges[2u * i + 2u]);
-            incoming = nearest_received(at.j, at.x, toward, s, line);
+            received = nearest_received(at.j, at.x, toward, s, line);
         }
-        image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_radiance(at, incoming, toward), 1.0);
+        list_near_sender(received, at.x, toward, pixel);
+        image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_radiance(at, received.radiance, toward), 1.0);
+    }
+}
+
+// The patch-level Lfs_m that bundle_reflect packed into the w slots of image_outgoing (`top`)
+// and image_mean_radiance (`rest`): `pack_first_bounce` there.
+fn unpack_first_bounce(top: f32, rest: f32) -> vec3<f32> {
+    let bits = u32(rest);
+    let others = vec2<f32>(f32((bits >> 11u) & 2047u), f32(bits & 2047u)) * (top / 2047.0);
+    switch (bits >> 22u) {
+        case 0u: {
+            return vec3<f32>(top, others.x, others.y);
+        }
+        case 1u: {
+            return vec3<f32>(others.x, top, others.y);
+        }
+        default: {
+            return vec3<f32>(others.x, others.y, top);
+        }
+    }
+}
+
+// G's weight of radiance arriving at x along `toward`: 2 pi |n . d| f(-toward, w_out), the
+// part of `gather_radiance` that is linear in what arrives.
+fn gather_weight(at: Seen, toward: vec3<f32>) -> vec3<f32> {
+    let m = materials[patches_at(at.j).material];
+    let cos_d = abs(dot(at.n, toward));
+    var weight = 2.0 * m.diffuse.rgb * cos_d;
+    if (m.kind == MATERIAL_PHONG && dot(at.n, toward) > 0.0) {
+        weight += 2.0 * PI * cos_d * brdf_glossy(m, at.n, toward, at.w_out);
+    }
+    return weight;
+}
+
+// For the pixels `gather` and `gather_edges` listed in `near_senders` (a near sender m):
+// G with m's first reflection of the lights at the point y that x's ray meets, with y's own
+// visibility of each light, D(y, -toward), in place of the patch-level Lfs_m that `gather`
+// took with image_outgoing (docs/ALGORITHM.md 6, "Near senders' first bounce per point").
+// G is linear in what arrives, so the difference times G's weight is added, with no count.
+// Its own pass: inlined in the gather, the direct light's code made every pixel's gather
+// three times as long on lavapipe, though few pixels need it.
+@compute @workgroup_size(64)
+fn gather_first_bounce(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let size = camera.size.xy;
+    let listed = atomicLoad(&near_senders[0]);
+    for (var i = gid.x; i < listed; i += EDGE_INVOCATIONS) {
+        let pixel = atomicLoad(&near_senders[2u * i + 1u]);
+        let m = atomicLoad(&near_senders[2u * i + 2u]) - 1u;
+        let at = seen(vec2<u32>(pixel % size.x, pixel / size.x + params.first_row));
+        let toward = bundle_side(at.n, bundle.direction.xyz) * bundle.direction.xyz;
+        let y = sender_point(m, at.x, toward).xyz;
+        let n = patches_at(m).normal.xyz;
+        let per_point = direct_light(m, y, n, materials[patches_at(m).material], -toward, false);
+        let lfs = unpack_first_bounce(image_outgoing_at(m).w, image_mean_radiance_at(m).w);
+        let difference = per_point - lfs;
+        image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_weight(at, toward) * difference, 0.0);
     }
 }

@@ -23,10 +23,13 @@ pub const SPEC: KernelSpec = KernelSpec {
             // Bits of the largest O channel (positive floats order like their bits).
             read_write::<u32>("max_bits"),
             // rgb what the image gathers from j (its diffuse reflection of the mean J of the
-            // image steps so far), w s_j; one writer per patch.
+            // image steps so far), w s_j, or with `writes_first_bounce` the largest channel
+            // of Lfs_j; one writer per patch.
             read_write::<[f32; 4]>("image_outgoing").paged(OUTGOING.pages),
             // rgb Lbar_j as this step found it, before finalize updates it: the control
-            // variate of the image's gather at j's own pixels; one writer per patch.
+            // variate of the image's gather at j's own pixels; w 0, or with
+            // `writes_first_bounce` the other two channels of Lfs_j (`pack_first_bounce`
+            // in wgsl/bundle_reflect.wgsl); one writer per patch.
             read_write::<[f32; 4]>("image_mean_radiance").paged(OUTGOING.pages),
         ],
         FIRST_SHOT_TABLE_GROUP,
@@ -47,10 +50,14 @@ pub struct ReflectOutputs<'a> {
     pub outgoing: &'a Paged,
     pub image_outgoing: &'a Paged,
     pub image_mean_radiance: &'a Paged,
+    /// Whether the image evaluates near senders' first bounce per point and so reads Lfs_j,
+    /// which then rides in the w slots of `image_outgoing` and `image_mean_radiance`.
+    pub writes_first_bounce: bool,
 }
 
 impl BundleReflect {
-    /// `like`: a stage over arrays of the same paging whose pipeline this one shares.
+    /// `like`: a stage over arrays of the same paging whose pipeline this one shares (and
+    /// its `writes_first_bounce`).
     pub fn new(
         device: &wgpu::Device,
         scene: &SceneBuffers,
@@ -59,12 +66,13 @@ impl BundleReflect {
         outputs: ReflectOutputs<'_>,
         like: Option<&Self>,
     ) -> Self {
-        let ReflectOutputs { outgoing, image_outgoing, image_mean_radiance } = outputs;
+        let ReflectOutputs { outgoing, image_outgoing, image_mean_radiance, writes_first_bounce } = outputs;
         let (built, pipeline) = match like {
             Some(like) => (like.kernel.clone(), like.pipeline.clone()),
             None => {
                 let built = SPEC.build_paged(device, scene.paging());
-                let pipeline = built.compute_pipeline(device, "main");
+                let constants = [("IMAGE_FIRST_BOUNCE", writes_first_bounce as u32 as f64)];
+                let pipeline = built.specialized_pipeline(device, "main", &constants);
                 (built, pipeline)
             }
         };

@@ -15,8 +15,14 @@ use crate::{Error, Result};
 pub const SPEC: KernelSpec = KernelSpec {
     stem: "image_estimate",
     visibility: wgpu::ShaderStages::COMPUTE,
-    // `direct`, `gather`: one invocation per pixel; `gather_edges`: EDGE_WORKGROUPS.
-    entry_points: &[compute("direct", [8, 8, 1]), compute("gather", [8, 8, 1]), compute("gather_edges", [64, 1, 1])],
+    // `direct`, `gather`: one invocation per pixel; `gather_edges`, `gather_first_bounce`:
+    // EDGE_WORKGROUPS.
+    entry_points: &[
+        compute("direct", [8, 8, 1]),
+        compute("gather", [8, 8, 1]),
+        compute("gather_edges", [64, 1, 1]),
+        compute("gather_first_bounce", [64, 1, 1]),
+    ],
     groups: &[
         &[
             uniform::<GpuCamera>("camera"),
@@ -37,6 +43,10 @@ pub const SPEC: KernelSpec = KernelSpec {
             // Each material's glossy-lobe albedo table (`scene_buffers::gpu_glossy_albedo`):
             // the control variate of the gather's glossy part.
             read::<f32>("glossy_albedo"),
+            // The band's pixels whose sender is near (docs/ALGORITHM.md 6): [0] their count,
+            // then per pixel its index and the sender's id; `gather` and `gather_edges` list
+            // them, `gather_first_bounce` evaluates the sender's first bounce per point.
+            read_write::<u32>("near_senders"),
         ],
         // The direct light (`direct_light::DirectLights`).
         &[
@@ -87,6 +97,8 @@ struct Band {
     sums: [wgpu::Buffer; 2],
     /// The gather's list of pixels left to `gather_edges` (a count, then two u32 a pixel).
     edges: wgpu::Buffer,
+    /// The gathers' list of pixels with a near sender (a count, then two u32 a pixel).
+    near_senders: wgpu::Buffer,
     /// Group 0 for `direct` (binding `sums[0]`) and for `gather` (`sums[1]`).
     groups: [wgpu::BindGroup; 2],
 }
@@ -98,6 +110,8 @@ pub struct ImageEstimate {
     direct_pipeline: wgpu::ComputePipeline,
     gather_pipeline: wgpu::ComputePipeline,
     edges_pipeline: wgpu::ComputePipeline,
+    /// `gather_first_bounce`, where the gathers list near senders (`first_bounce_per_point`).
+    first_bounce_pipeline: Option<wgpu::ComputePipeline>,
     bands: Vec<Band>,
     direct_group: wgpu::BindGroup,
     gather_group: wgpu::BindGroup,
@@ -112,6 +126,8 @@ impl ImageEstimate {
     /// `gather`: the bundle buffers of the iteration, or `None` for direct-light-only passes.
     /// `band_rows`: rows per band of the image sum (`band_rows`, or fewer to test the bands).
     /// `pixel_stride`: `iteration::pixel_stride` of the step's bundles.
+    /// `first_bounce_per_point`: the gather evaluates each sender's first reflection of the
+    /// lights at the point it sees (`render::first_bounce_per_point`).
     /// `like`: the estimate of another view of the same render, whose kernel and pipelines
     /// this one shares (they depend on the scene's paging and lights, not on the camera).
     #[allow(clippy::too_many_arguments)]
@@ -123,22 +139,29 @@ impl ImageEstimate {
         gather: Option<&GatherBuffers>,
         band_rows: u32,
         pixel_stride: u32,
+        first_bounce_per_point: bool,
         like: Option<&Self>,
     ) -> Self {
-        let (built, direct_pipeline, gather_pipeline, edges_pipeline) = match like {
+        let (built, direct_pipeline, gather_pipeline, edges_pipeline, first_bounce_pipeline) = match like {
             Some(like) => (
                 like.built.clone(),
                 like.direct_pipeline.clone(),
                 like.gather_pipeline.clone(),
                 like.edges_pipeline.clone(),
+                like.first_bounce_pipeline.clone(),
             ),
             None => {
                 let built = SPEC.build_paged(device, scene.paging());
                 // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
                 let direct_pipeline = built.specialized_pipeline(device, "direct", &direct.specialization());
-                let gather_pipeline = built.specialized_pipeline(device, "gather", &[("SEEN_IN_GATHER", 1.0)]);
-                let edges_pipeline = built.compute_pipeline(device, "gather_edges");
-                (built, direct_pipeline, gather_pipeline, edges_pipeline)
+                let per_point = ("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64);
+                let gather_pipeline =
+                    built.specialized_pipeline(device, "gather", &[("SEEN_IN_GATHER", 1.0), per_point]);
+                let edges_pipeline = built.specialized_pipeline(device, "gather_edges", &[per_point]);
+                // The direct light at the near senders' points, compiled like `direct`.
+                let first_bounce_pipeline = first_bounce_per_point
+                    .then(|| built.specialized_pipeline(device, "gather_first_bounce", &direct.specialization()));
+                (built, direct_pipeline, gather_pipeline, edges_pipeline, first_bounce_pipeline)
             }
         };
         let band_rows = band_rows.max(1);
@@ -154,12 +177,13 @@ impl ImageEstimate {
                 let bytes = camera.width as u64 * rows as u64 * IMAGE_SUM_BYTES_PER_PIXEL;
                 let sums = ["firstshot.image_estimate.direct_sum", "firstshot.image_estimate.gather_sum"]
                     .map(|label| buffers::storage_zeroed(device, label, bytes, wgpu::BufferUsages::COPY_SRC));
-                let edges = buffers::storage_zeroed(
-                    device,
-                    "firstshot.image_estimate.edges",
-                    4 * (2 * camera.width as u64 * rows as u64 + 1),
-                    wgpu::BufferUsages::empty(),
-                );
+                // A list of at most every pixel of the band, each listed once per bundle.
+                let list = |label| {
+                    let bytes = 4 * (2 * camera.width as u64 * rows as u64 + 1);
+                    buffers::storage_zeroed(device, label, bytes, wgpu::BufferUsages::empty())
+                };
+                let edges = list("firstshot.image_estimate.edges");
+                let near_senders = list("firstshot.image_estimate.near_senders");
                 let groups = [0, 1].map(|half| {
                     built.bind_group(
                         device,
@@ -173,10 +197,11 @@ impl ImageEstimate {
                             ("image_sum", (&sums[half]).into()),
                             ("edges", (&edges).into()),
                             ("glossy_albedo", (&scene.glossy_albedo).into()),
+                            ("near_senders", (&near_senders).into()),
                         ],
                     )
                 });
-                Band { first_row, rows, params, sums, edges, groups }
+                Band { first_row, rows, params, sums, edges, near_senders, groups }
             })
             .collect();
         let direct_group = built.bind_group(
@@ -195,6 +220,7 @@ impl ImageEstimate {
             direct_pipeline,
             gather_pipeline,
             edges_pipeline,
+            first_bounce_pipeline,
             bands,
             direct_group,
             gather_group,
@@ -260,6 +286,7 @@ impl ImageEstimate {
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
         for band in &self.bands {
             encoder.clear_buffer(&band.edges, 0, Some(4));
+            encoder.clear_buffer(&band.near_senders, 0, Some(4));
             // One invocation per block of stride x stride pixels that meets the band's rows.
             let stride = self.pixel_stride;
             let block_rows = (band.first_row + band.rows).div_ceil(stride) - band.first_row / stride;
@@ -274,6 +301,15 @@ impl ImageEstimate {
                 &bind_groups,
                 edges,
             );
+            if let Some(pipeline) = &self.first_bounce_pipeline {
+                kernel::dispatch(
+                    encoder,
+                    "firstshot.image_estimate.gather_first_bounce",
+                    pipeline,
+                    &bind_groups,
+                    edges,
+                );
+            }
         }
     }
 
