@@ -261,7 +261,7 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
 // test08). So a surface seen there blocks where the segment crosses its plane inside its
 // triangle or a little past an edge it shares with a neighbour of its plane
 // (`crosses_surface`), and not past its outline.
-fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>, wide: bool) -> bool {
+fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     let w = x - y;
     let f = window_face(w, first, count);
     let z = dot(w, faces[f].view.forward.xyz);
@@ -289,12 +289,9 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>, wide: boo
         // missed a triangle whose corner pokes between them without covering a centre: the
         // Sierpinski scene's direct light was 0.81 % off Mitsuba's, 93 % of it too bright;
         // 0.59 % with 3 x 3, 0.55 % with 4 x 4, for about 8 % more time per direct pass.
-        // The first bounce at a sender's point (`wide` false) tests the texel alone, as the
-        // first shot's own item buffers count a patch by texel centres.
         let centre = vec2<i32>(floor(pixel));
-        let reach = select(0, 1, wide);
-        for (var dy = -reach; dy <= reach; dy++) {
-            for (var dx = -reach; dx <= reach; dx++) {
+        for (var dy = -1; dy <= 1; dy++) {
+            for (var dx = -1; dx <= 1; dx++) {
                 let at = clamp(centre + vec2<i32>(dx, dy), vec2<i32>(0), last);
                 if (blocks(atlas_id(tile.w, origin + at), j, y, x, false, 0.0)) {
                     return false;
@@ -354,7 +351,7 @@ fn emitted_share(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
 }
 
 // D(x, w_out): every light's direct radiance reflected at x on patch j toward w_out.
-fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>, wide: bool) -> vec3<f32> {
+fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
     for (var i = 0u; i < params.light_count; i++) {
         let kind = lights[i].kind;
@@ -391,7 +388,7 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
                 g *= light_share(r2, cos_l, lights[i].normal.w);
             }
         }
-        if (g > 0.0 && visible(y, lights[i].first_face, lights[i].faces, j, x, wide)) {
+        if (g > 0.0 && visible(y, lights[i].first_face, lights[i].faces, j, x)) {
             sum += lights[i].strength.rgb * g * brdf(m, n, w_in, w_out);
         }
     }
@@ -672,7 +669,10 @@ fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> Receiv
 // pixels 11-14 %; tests/per_pixel.rs test13). Unrolled: a CPU adapter runs a data-dependent loop over
 // storage many times slower. Only the pixels `gather` lists in `edges` get here: run among
 // the others, this branch made every vector of 8 pixels that held one such pixel pay for it.
-fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLine) -> Received {
+//
+// Not `decided` where nothing lies ahead on the line (nor, without `plane_rule`, where x's ray
+// hits none of the candidates): `gather_edges` then looks at the lines beside.
+fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLine, plane_rule: bool) -> Received {
     let range = vec2<u32>(line.begin, line.end);
     let lo = line.lo;
     let eps = 1e-5 / bundle.centre.w;
@@ -705,11 +705,24 @@ fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLin
     // ray still meets something the line does not show: the mean radiance j receives,
     // Lbar_j, stands in for it.
     let best = n.plane;
+    if (!plane_rule || (best.patch_id == NO_PATCH && !n.blocked)) {
+        return received_const(vec3<f32>(0.0), false);
+    }
     if (best.patch_id == NO_PATCH) {
-        return received_const(select(bundle.environment.rgb, image_mean_radiance_at(j).rgb, n.blocked), true);
+        return received_const(image_mean_radiance_at(j).rgb, true);
     }
     let m = best.patch_id - 1u;
     return received_from(m, x, toward);
+}
+
+// `nearest_received` on the line of grid cell `cell` by x's ray alone (no plane rule): not
+// decided off the grid or where x's ray hits none of its candidates.
+fn beside_nearest(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, cell: vec2<i32>) -> Received {
+    let line = line_at(cell);
+    if (line.outside) {
+        return received_const(vec3<f32>(0.0), false);
+    }
+    return nearest_received(j, x, toward, s, search(line, x, s), false);
 }
 
 // The surface point a camera pixel sees in this pass: x on patch j (normal n) with w_out
@@ -766,7 +779,7 @@ fn direct(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     if (at.kind == SEEN_SURFACE) {
         let m = materials[patches_at(at.j).material];
-        radiance = direct_light(at.j, at.x, at.n, m, at.w_out, true);
+        radiance = direct_light(at.j, at.x, at.n, m, at.w_out);
         if (params.seen_in_gather == 0u) {
             radiance += patches_at(at.j).emission.rgb;
         }
@@ -930,7 +943,25 @@ fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (!received.decided) {
             var line = line_at(base);
             line.lo = atomicLoad(&edges[2u * i + 2u]);
-            received = nearest_received(at.j, at.x, toward, s, line);
+            received = nearest_received(at.j, at.x, toward, s, line, true);
+        }
+        // Nothing ahead on x's own line: it may pass outside the surfaces right beside x, as
+        // past a room's crease, where x's ray meets the other wall at once but the line, half
+        // a line off x, misses both walls and leaves the scene. Answering the environment
+        // there lit every crease of a closed room with the sky outside it (its pixels up to
+        // 18 % of the sky). So the lines beside x decide by x's own ray first; only where
+        // it hits nothing they hold either does x see the environment.
+        if (!received.decided) {
+            received = beside_nearest(at.j, at.x, toward, s, base + first);
+        }
+        if (!received.decided) {
+            received = beside_nearest(at.j, at.x, toward, s, base + second);
+        }
+        if (!received.decided) {
+            received = beside_nearest(at.j, at.x, toward, s, base + side);
+        }
+        if (!received.decided) {
+            received = received_const(bundle.environment.rgb, true);
         }
         list_near_sender(received, at.x, toward, pixel);
         image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_radiance(at, received.radiance, toward), 1.0);
@@ -985,7 +1016,7 @@ fn gather_first_bounce(@builtin(global_invocation_id) gid: vec3<u32>) {
         let toward = bundle_side(at.n, bundle.direction.xyz) * bundle.direction.xyz;
         let y = sender_point(m, at.x, toward).xyz;
         let n = patches_at(m).normal.xyz;
-        let per_point = direct_light(m, y, n, materials[patches_at(m).material], -toward, false);
+        let per_point = direct_light(m, y, n, materials[patches_at(m).material], -toward);
         let lfs = unpack_first_bounce(image_outgoing_at(m).w, image_mean_radiance_at(m).w);
         let difference = per_point - lfs;
         image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_weight(at, toward) * difference, 0.0);
