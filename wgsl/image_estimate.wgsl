@@ -953,14 +953,12 @@ fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>) {
         // there lit every crease of a closed room with the sky outside it (its pixels up to
         // 18 % of the sky). So the lines beside x decide, by the same rules; only where
         // nothing lies ahead on them either does x see the environment.
-        if (!received.decided) {
-            received = beside_nearest(at.j, at.x, toward, s, base + first);
-        }
-        if (!received.decided) {
-            received = beside_nearest(at.j, at.x, toward, s, base + second);
-        }
-        if (!received.decided) {
-            received = beside_nearest(at.j, at.x, toward, s, base + side);
+        // A loop, not three calls: each inlined copy of the search grows the kernel, and with
+        // the paged accessors of a large scene three copies took lavapipe minutes to compile
+        // (tests/scale.rs from 20 s to over 3 minutes). Few pixels get here.
+        let beside = array<vec2<i32>, 3>(base + first, base + second, base + side);
+        for (var c = 0u; c < 3u && !received.decided; c++) {
+            received = beside_nearest(at.j, at.x, toward, s, beside[c]);
         }
         if (!received.decided) {
             received = received_const(bundle.environment.rgb, true);
