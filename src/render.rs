@@ -738,7 +738,8 @@ impl<'a> Renderer<'a> {
             Some(stats)
         };
         let direct = DirectLights::new(ctx, scene, patches, &buffers, options);
-        let per_point = first_bounce_per_point(options, patches) && direct.count() > 0;
+        // Only where the image gathers (an iteration) and there are lights to evaluate.
+        let per_point = options.iterations > 0 && first_bounce_per_point(options, patches) && direct.count() > 0;
         let iteration = if options.iterations == 0 {
             None
         } else {
@@ -777,7 +778,7 @@ impl<'a> Renderer<'a> {
                 gather,
                 band_rows,
                 stride,
-                per_point && gathers,
+                per_point,
                 like.map(|v| &v.estimate),
             );
             estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);
@@ -800,7 +801,7 @@ impl<'a> Renderer<'a> {
             image_start: burn_in,
             direct_due: true,
             windows_due: true,
-            first_bounce_per_point: per_point && gathers,
+            first_bounce_per_point: per_point,
             first_shot,
             patch_count: patches.patches.len(),
             light_samples: patches.samples.len(),
