@@ -146,7 +146,9 @@ pub fn shadow_resolution(scene: &Scene, patches: &Patches, options: &RenderOptio
 ///
 /// Measured on the Sierpinski scene (16 384 fractal triangles of edge 0.031 seen from
 /// 2.5-4 m: median q 170, so 2048), the direct light's error against Mitsuba 3 is 8.7 % at
-/// 512, 2.8 % at 1024 and 1.3 % at 2048; the Cornell boxes (median q 21-24) keep 512.
+/// 512, 2.8 % at 1024 and 1.3 % at 2048; the Cornell boxes (median q 21-24) get 464 and 416,
+/// which still leak a little light into the umbra beside the tall block, most likely where the
+/// light sees a face nearly edge-on (docs/PERFORMANCE.md, "Where the error stops falling").
 pub fn auto_resolution(scene: &Scene, patches: &Patches, floor: u32) -> u32 {
     let mut points: Vec<DVec3> = Vec::new();
     for light in &scene.lights {
