@@ -670,9 +670,9 @@ fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> Receiv
 // storage many times slower. Only the pixels `gather` lists in `edges` get here: run among
 // the others, this branch made every vector of 8 pixels that held one such pixel pay for it.
 //
-// Not `decided` where nothing lies ahead on the line (nor, without `plane_rule`, where x's ray
-// hits none of the candidates): `gather_edges` then looks at the lines beside.
-fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLine, plane_rule: bool) -> Received {
+// Not `decided` where nothing lies ahead on the line: `gather_edges` then looks at the lines
+// beside.
+fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLine) -> Received {
     let range = vec2<u32>(line.begin, line.end);
     let lo = line.lo;
     let eps = 1e-5 / bundle.centre.w;
@@ -705,7 +705,7 @@ fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLin
     // ray still meets something the line does not show: the mean radiance j receives,
     // Lbar_j, stands in for it.
     let best = n.plane;
-    if (!plane_rule || (best.patch_id == NO_PATCH && !n.blocked)) {
+    if (best.patch_id == NO_PATCH && !n.blocked) {
         return received_const(vec3<f32>(0.0), false);
     }
     if (best.patch_id == NO_PATCH) {
@@ -715,16 +715,17 @@ fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLin
     return received_from(m, x, toward);
 }
 
-// `nearest_received` on the line of grid cell `cell`: not decided off the grid or where
-// nothing lies ahead of x there either. With x's ray alone (no plane rule) the sky still
-// reached single crease pixels of a closed room, up to 13 % of it: there the beside line's
-// crossing of the other wall and x's ray's lie in two of its patches.
+// `nearest_received` on the line of grid cell `cell`, by the same rules as on x's own line:
+// not decided off the grid or where nothing lies ahead of x there either. (Asked by x's ray
+// alone, without the plane rule, the lines beside still let the sky reach single crease
+// pixels of a closed room, up to 13 % of it: there the beside line's crossing of the other
+// wall and x's ray's lie in two of its patches.)
 fn beside_nearest(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, cell: vec2<i32>) -> Received {
     let line = line_at(cell);
     if (line.outside) {
         return received_const(vec3<f32>(0.0), false);
     }
-    return nearest_received(j, x, toward, s, search(line, x, s), true);
+    return nearest_received(j, x, toward, s, search(line, x, s));
 }
 
 // The surface point a camera pixel sees in this pass: x on patch j (normal n) with w_out
@@ -945,7 +946,7 @@ fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (!received.decided) {
             var line = line_at(base);
             line.lo = atomicLoad(&edges[2u * i + 2u]);
-            received = nearest_received(at.j, at.x, toward, s, line, true);
+            received = nearest_received(at.j, at.x, toward, s, line);
         }
         // Nothing ahead on x's own line: it may pass outside the surfaces right beside x, as
         // past a room's crease, where x's ray meets the other wall at once but the line, half
