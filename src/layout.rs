@@ -93,8 +93,19 @@ pub struct GpuPatch {
     /// on its triangle side stands for (T A_t, `direct_light.rs`), which gives the density
     /// of those points for multiple importance sampling (docs/ALGORITHM.md 6); else 0.
     pub light_pick_area: f32,
-    pub _pad: u32,
+    /// The patch's piece for the image's gather (`scene::Piece`, `piece_bits`): the patches
+    /// `PIECE_BEFORE` steps before it and `PIECE_AFTER` steps after it (steps of 2 with
+    /// `PIECE_TWINS`, 1 without) are its piece; 0 for a piece of its own.
+    pub piece: u32,
 }
+
+/// `GpuPatch::piece`: the steps to the piece's last patch (bits 0-14), to its first (bits
+/// 15-29), and whether twins interleave (bit 30). Pieces longer than `PIECE_REACH` steps
+/// either way are cut to that reach around each patch, which only narrows what the gather
+/// treats as one surface. WGSL: the same constants (`wgsl_constants`).
+pub const PIECE_REACH: u32 = 0x7fff;
+pub const PIECE_BEFORE_SHIFT: u32 = 15;
+pub const PIECE_TWINS: u32 = 1 << 30;
 
 /// A material in the unified max-Phong form (diffuse = Phong with ks = 0). WGSL: `Material`.
 #[repr(C)]
@@ -346,7 +357,7 @@ macro_rules! layout {
 /// The layouts of every struct mirrored in `wgsl/common/layout.wgsl` (padding excluded).
 pub fn shared_layouts() -> Vec<StructLayout> {
     vec![
-        layout!(GpuPatch => "Patch" { v0, v1, v2, normal, emission, material, flags }),
+        layout!(GpuPatch => "Patch" { v0, v1, v2, normal, emission, material, flags, light_pick_area, piece }),
         layout!(GpuMaterial => "Material" { diffuse, specular, kind }),
         layout!(GpuLightSample => "LightSample" { position, normal, strength, kind, cone_scale, cone_offset }),
         layout!(GpuPatchState => "PatchState" { incoming, direction, diffuse, mean_radiance, diffuse_sum, earlier }),
@@ -368,6 +379,9 @@ pub fn wgsl_constants() -> String {
          const PATCH_FIRST_SHOT_LIGHT: u32 = {PATCH_FIRST_SHOT_LIGHT}u;\n\
          const PATCH_SMOOTH_EDGE: u32 = {PATCH_SMOOTH_EDGE}u;\n\
          const NO_PATCH: u32 = {NO_PATCH}u;\n\
+         const PIECE_REACH: u32 = {PIECE_REACH}u;\n\
+         const PIECE_BEFORE_SHIFT: u32 = {PIECE_BEFORE_SHIFT}u;\n\
+         const PIECE_TWINS: u32 = {PIECE_TWINS}u;\n\
          const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
          const LINE_BUCKET: u32 = {LINE_BUCKET}u;\n\

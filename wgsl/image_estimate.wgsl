@@ -450,9 +450,19 @@ fn list_near_sender(received: Received, x: vec3<f32>, toward: vec3<f32>, pixel: 
     }
 }
 
-// `found`, or fragment k + 1 of the line [begin, end) if it belongs to patch j.
-fn own_fragment(found: u32, k: u32, range: vec2<u32>, j: u32) -> u32 {
-    if (found != NO_PATCH || k < range.x || k >= range.y || (fragments[k].y & ~FRAGMENT_FRONT_BIT) != j) {
+// Whether patch m is of patch j's piece (`piece`, j's Patch::piece): a patch of the same
+// split piece of a source triangle, in its plane, facing its way, with no contact line
+// between the two (Rust: scene::Piece).
+fn in_piece(m: u32, j: u32, piece: u32) -> bool {
+    let step = select(1u, 2u, (piece & PIECE_TWINS) != 0u);
+    let first = j - ((piece >> PIECE_BEFORE_SHIFT) & PIECE_REACH) * step;
+    let last = j + (piece & PIECE_REACH) * step;
+    return m >= first && m <= last && ((m - j) & (step - 1u)) == 0u;
+}
+
+// `found`, or fragment k + 1 of the line [begin, end) if it belongs to j's piece (`in_piece`).
+fn own_fragment(found: u32, k: u32, range: vec2<u32>, j: u32, piece: u32) -> u32 {
+    if (found != NO_PATCH || k < range.x || k >= range.y || !in_piece(fragments[k].y & ~FRAGMENT_FRONT_BIT, j, piece)) {
         return found;
     }
     return k + 1u;
@@ -620,9 +630,9 @@ fn search(line_in: OnLine, x: vec3<f32>, s: f32) -> OnLine {
     return line;
 }
 
-// What x (on patch j) receives from direction `toward` (= s d) where j's own fragment lies on
-// x's line; not `decided` where it does not (x near j's edge), which `nearest_received` then
-// decides.
+// What x (on patch j) receives from direction `toward` (= s d) where a fragment of j's piece
+// lies on x's line; not `decided` where none does (x near its piece's edge), which
+// `gather_edges` then decides.
 fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> Received {
     if (line.outside) {
         return received_const(bundle.environment.rgb, true);
@@ -635,13 +645,19 @@ fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> Receiv
     // direction, O if that one's front faces back, black if its back does, the environment
     // past the line's end. Then the gather agrees with the patch state J_j it refines, also
     // at contacts, where the line's centre and x's own ray can pass on different sides.
+    // Another patch of j's piece on the line serves as well: it lies in x's plane, facing
+    // its way, within a line of x, with no contact line between (the cuts bound the pieces),
+    // so what leaves it along the line is what leaves x. Without it, every pixel within
+    // about half a line of its own patch's edge went to `gather_edges`, a third of them
+    // where patches are a few lines wide.
     let range = vec2<u32>(begin, end);
+    let piece = patches_at(j).piece;
     var own = NO_PATCH;
-    own = own_fragment(own, lo - 2u, range, j);
-    own = own_fragment(own, lo - 1u, range, j);
-    own = own_fragment(own, lo, range, j);
-    own = own_fragment(own, lo + 1u, range, j);
-    own = own_fragment(own, lo + 2u, range, j);
+    own = own_fragment(own, lo - 2u, range, j, piece);
+    own = own_fragment(own, lo - 1u, range, j, piece);
+    own = own_fragment(own, lo, range, j, piece);
+    own = own_fragment(own, lo + 1u, range, j, piece);
+    own = own_fragment(own, lo + 2u, range, j, piece);
     if (own != NO_PATCH) {
         let k = own - 1u;
         let front = (fragments[k].y & FRAGMENT_FRONT_BIT) != 0u;

@@ -245,6 +245,7 @@ pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<Gp
     let black = scene.materials.len() as u32;
     let has_sun = scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Directional { .. }));
     let smooth = if has_sun { smooth_edges(patches) } else { Vec::new() };
+    let pieces = piece_bits(patches);
     patches
         .patches
         .iter()
@@ -266,10 +267,28 @@ pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<Gp
                 material: p.material.unwrap_or(black),
                 flags,
                 light_pick_area: light_pick_area(patches, p, first_shot) as f32,
-                _pad: 0,
+                piece: pieces.get(i).copied().unwrap_or(0),
             }
         })
         .collect()
+}
+
+/// `GpuPatch::piece` of every patch, from `Patches::pieces` (0, a piece of its own, for a
+/// patch in none).
+pub fn piece_bits(patches: &Patches) -> Vec<u32> {
+    let mut bits = vec![0u32; patches.patches.len()];
+    for piece in &patches.pieces {
+        let sides = piece.sides.max(1);
+        let steps = (piece.end - piece.first) / sides;
+        for i in piece.first..piece.end {
+            let at = (i - piece.first) / sides;
+            let before = at.min(PIECE_REACH);
+            let after = (steps - 1 - at).min(PIECE_REACH);
+            let twins = if sides == 2 { PIECE_TWINS } else { 0 };
+            bits[i as usize] = twins | (before << PIECE_BEFORE_SHIFT) | after;
+        }
+    }
+    bits
 }
 
 /// `PATCH_SMOOTH_EDGE` bits of every patch: for each edge (opposite vertex k), whether
@@ -517,6 +536,58 @@ impl FirstShotTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `piece_bits` read back as `in_piece` in wgsl/image_estimate.wgsl reads them: patch m is
+    /// of j's piece exactly when the two are on one side of one `Piece` (twins interleaved
+    /// in a two-sided one), and a piece longer than the reach is cut to it around each patch.
+    #[test]
+    fn piece_bits_name_the_patches_of_the_same_piece_and_side() {
+        use crate::scene::{Patch, Piece};
+        let in_piece = |m: u32, j: u32, bits: u32| {
+            let step = if bits & PIECE_TWINS != 0 { 2 } else { 1 };
+            let first = j - ((bits >> PIECE_BEFORE_SHIFT) & PIECE_REACH) * step;
+            let last = j + (bits & PIECE_REACH) * step;
+            m >= first && m <= last && (m - j).is_multiple_of(step)
+        };
+        let patch = Patch {
+            vertices: [DVec3::ZERO, DVec3::X, DVec3::Y],
+            normal: DVec3::Z,
+            area: 0.5,
+            material: Some(0),
+            emission: [0.0; 3],
+            kind: PatchKind::Surface { surface: 0 },
+            twin: false,
+        };
+        // A patch of its own (0), a one-sided piece of 3, a two-sided piece of 2 x 3, a lone
+        // patch again, and a one-sided piece past the reach.
+        let long = 2 * PIECE_REACH + 10;
+        let pieces = vec![
+            Piece { first: 1, end: 4, sides: 1 },
+            Piece { first: 4, end: 10, sides: 2 },
+            Piece { first: 11, end: 11 + long, sides: 1 },
+        ];
+        let patches =
+            Patches { patches: vec![patch; (11 + long) as usize], pieces: pieces.clone(), ..Default::default() };
+        let bits = piece_bits(&patches);
+        let piece_of = |i: u32| {
+            pieces
+                .iter()
+                .position(|p| (p.first..p.end).contains(&i))
+                .map(|k| (k, (i - pieces[k].first) % pieces[k].sides))
+        };
+        for j in 0..14 {
+            for m in 0..14 {
+                let same = j == m || (piece_of(j).is_some() && piece_of(j) == piece_of(m));
+                assert_eq!(in_piece(m, j, bits[j as usize]), same, "patches {m} and {j}");
+            }
+        }
+        // Past the reach: the reach either way of each patch, no further.
+        let j = 11 + long / 2;
+        assert!(in_piece(j - PIECE_REACH, j, bits[j as usize]) && !in_piece(j - PIECE_REACH - 1, j, bits[j as usize]));
+        assert!(in_piece(j + PIECE_REACH, j, bits[j as usize]) && !in_piece(j + PIECE_REACH + 1, j, bits[j as usize]));
+        assert!(in_piece(11 + long - 1, 11 + long - 1, bits[(11 + long - 1) as usize]));
+        assert!(!in_piece(11 + long, 11 + long - 1, bits[(11 + long - 1) as usize]));
+    }
 
     /// A floor quad cut into patches, a box standing on it and a two-sided square: which
     /// edges `smooth_edges` finds smooth.

@@ -511,14 +511,10 @@ mod tests {
         }
     }
 
-    #[test]
-    fn no_cornell_floor_patch_reaches_under_a_block() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.toml");
-        let (scene, patch_size) = crate::scene::tessellate::tests::scene_from_file(&path);
-        let patches = crate::scene::tessellate(&scene, patch_size).unwrap();
-        // The blocks' footprints: the bottom edges of their side faces (y = 0), as 2-D
-        // convex polygons in x-z, from the scene itself (shapes 5-9 and 10-14 hold the
-        // top and the four sides of each block).
+    /// The Cornell box's blocks' footprints: the bottom edges of their side faces (y = 0), as
+    /// 2-D convex polygons in x-z, from the scene itself (shapes 5-9 and 10-14 hold the top
+    /// and the four sides of each block).
+    fn cornell_footprints(scene: &Scene) -> [Vec<glam::DVec2>; 2] {
         let footprint = |shapes: std::ops::Range<usize>| -> Vec<glam::DVec2> {
             let mut corners: Vec<glam::DVec2> = Vec::new();
             for s in shapes {
@@ -536,14 +532,29 @@ mod tests {
             corners.sort_by(|a, b| (a.y - c.y).atan2(a.x - c.x).total_cmp(&(b.y - c.y).atan2(b.x - c.x)));
             corners
         };
-        let inside = |poly: &[glam::DVec2], p: glam::DVec2, margin: f64| {
-            (0..4).all(|i| {
-                let (a, b) = (poly[i], poly[(i + 1) % 4]);
-                (b - a).perp_dot(p - a) / (b - a).length() > margin
-            })
-        };
+        [footprint(5..10), footprint(10..15)]
+    }
+
+    /// Whether p lies inside the convex polygon by more than `margin`.
+    fn inside(poly: &[glam::DVec2], p: glam::DVec2, margin: f64) -> bool {
+        (0..poly.len()).all(|i| {
+            let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+            (b - a).perp_dot(p - a) / (b - a).length() > margin
+        })
+    }
+
+    fn cornell_box() -> (Scene, crate::scene::Patches) {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.toml");
+        let (scene, patch_size) = crate::scene::tessellate::tests::scene_from_file(&path);
+        let patches = crate::scene::tessellate(&scene, patch_size).unwrap();
+        (scene, patches)
+    }
+
+    #[test]
+    fn no_cornell_floor_patch_reaches_under_a_block() {
+        let (scene, patches) = cornell_box();
         let mut under = 0;
-        for block in [footprint(5..10), footprint(10..15)] {
+        for block in cornell_footprints(&scene) {
             for patch in patches.patches.iter().filter(|p| p.kind == crate::scene::PatchKind::Surface { surface: 0 }) {
                 let corners = patch.vertices.map(|v| glam::DVec2::new(v.x, v.z));
                 let centre = corners.iter().sum::<glam::DVec2>() / 3.0;
@@ -557,6 +568,52 @@ mod tests {
             }
         }
         assert!(under > 0);
+    }
+
+    /// The gather takes a patch of x's piece on x's line for x's own (wgsl/image_estimate.wgsl,
+    /// `own_received`): a piece must be one plane facing one way, and no contact may run
+    /// through it, or a floor point beside a block would receive what the floor under the
+    /// block receives (nothing).
+    #[test]
+    fn cornell_pieces_are_planar_and_end_at_the_blocks_feet() {
+        let (scene, patches) = cornell_box();
+        let footprints = cornell_footprints(&scene);
+        let mut covered = vec![0u32; patches.patches.len()];
+        let (mut floor_under, mut floor_outside) = (0, 0);
+        for piece in &patches.pieces {
+            assert!(piece.first < piece.end && piece.end as usize <= patches.patches.len(), "{piece:?}");
+            assert_eq!(piece.sides, 1, "the Cornell box has no two-sided surface");
+            let run = &patches.patches[piece.first as usize..piece.end as usize];
+            let p0 = &run[0];
+            for (i, p) in run.iter().enumerate() {
+                covered[piece.first as usize + i] += 1;
+                assert!(p.normal.dot(p0.normal) > 1.0 - 1e-12, "{piece:?}: {p:?} against {p0:?}");
+                for v in p.vertices {
+                    assert!((p0.normal.dot(v - p0.vertices[0])).abs() < 1e-9, "{piece:?}: {p:?} off {p0:?}'s plane");
+                }
+                assert_eq!(p.kind, p0.kind);
+            }
+            if p0.kind == (crate::scene::PatchKind::Surface { surface: 0 }) {
+                let centre = |p: &crate::scene::Patch| {
+                    let c = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0;
+                    glam::DVec2::new(c.x, c.z)
+                };
+                let under = |p: &crate::scene::Patch| footprints.iter().any(|f| inside(f, centre(p), 0.0));
+                let n = run.iter().filter(|p| under(p)).count();
+                assert!(n == 0 || n == run.len(), "{piece:?}: {n} of {} patches under a block", run.len());
+                if n == 0 {
+                    floor_outside += 1;
+                } else {
+                    floor_under += 1;
+                }
+            }
+        }
+        // Every surface patch in exactly one piece (the area light's patches in none).
+        for (p, &n) in patches.patches.iter().zip(&covered) {
+            let surface = matches!(p.kind, crate::scene::PatchKind::Surface { .. });
+            assert_eq!(n, u32::from(surface), "{p:?}");
+        }
+        assert!(floor_under > 0 && floor_outside > 0);
     }
 
     #[test]

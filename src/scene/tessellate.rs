@@ -120,6 +120,23 @@ pub struct Patches {
     pub emitters: Vec<Emitter>,
     /// One line each about what tessellation could not do as asked (emitters past the cap).
     pub notes: Vec<String>,
+    /// The runs of patches that one piece of a source triangle (after the contact cuts) was
+    /// split into, in order: the image's gather treats the patches of a piece as one surface
+    /// (`Piece`). Empty for patches made by hand: every patch is then a piece of its own.
+    pub pieces: Vec<Piece>,
+}
+
+/// The patches `first..end` that one piece of a source triangle was split into: coplanar,
+/// facing the same way, and with no contact line between them (the contact cuts bound the
+/// pieces), so a ray leaving any of them towards its front sees what one leaving a point of
+/// another right beside it sees. A two-sided surface's twins interleave (`sides` = 2): the
+/// piece's front patches are `first, first + 2, ...`, its backs `first + 1, first + 3, ...`,
+/// each a piece of its own for the gather.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Piece {
+    pub first: u32,
+    pub end: u32,
+    pub sides: u32,
 }
 
 /// An emitting shape as a first-shot light: the sides of its triangles that emit, each a
@@ -273,8 +290,10 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
         samples: Vec::with_capacity(sample_count),
         emitters: Vec::with_capacity(plan.emitters.len()),
         notes: plan.notes,
+        pieces: Vec::new(),
     };
     for (s, surface) in scene.surfaces.iter().enumerate() {
+        let copies = if surface.two_sided { 2 } else { 1 };
         for (t, triangle) in surface.triangles.iter().enumerate() {
             let kind = |back: bool| match plan.first_shot.get(&(s as u32, t as u32, back)) {
                 Some(&(emitter, side)) => PatchKind::Emitter { surface: s as u32, emitter, side },
@@ -290,7 +309,9 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
                     kind: kind(false),
                     twin: surface.two_sided,
                 };
+                let first = out.patches.len() as u32;
                 source.split_into(&base, kind(true), patch_size, &mut out.patches);
+                out.pieces.push(Piece { first, end: out.patches.len() as u32, sides: copies });
             }
         }
     }

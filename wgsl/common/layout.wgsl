@@ -11,7 +11,7 @@ struct Patch {
     material: u32,
     flags: u32,          // PATCH_* bits
     light_pick_area: f32, // first-shot emitting shape: T A_t of its side (MIS), else 0
-    _pad1: u32,
+    piece: u32,           // the patch's piece for the gather (Rust: GpuPatch::piece)
 }
 
 // Unified max-Phong material (Rust: GpuMaterial).
