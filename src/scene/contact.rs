@@ -41,7 +41,11 @@ pub const MAX_CUTS_PER_TRIANGLE: usize = 64;
 /// Source triangles that other surfaces cut, by (surface, triangle) index: the triangles
 /// that replace each one (counter-clockwise about the same normal, areas adding up to the
 /// source's). Triangles not in the map are not cut.
-pub type Pieces = HashMap<(usize, usize), Vec<[DVec3; 3]>>;
+///
+/// Each cut triangle's convex polygons, each as the triangles fanned from it: no contact line
+/// runs through a polygon (every cut crosses the whole triangle), so the image's gather may
+/// treat a polygon's patches as one surface (`scene::Piece`).
+pub type Pieces = HashMap<(usize, usize), Vec<Vec<[DVec3; 3]>>>;
 
 /// One triangle with its bounding box: a surface's (surface, triangle), or an area light's
 /// (`None`: it cuts, but is not cut).
@@ -99,7 +103,7 @@ pub fn contact_pieces(scene: &Scene) -> Pieces {
             continue;
         }
         let split = split_triangle(&e.vertices, cuts, tolerance);
-        if let (Some(id), true) = (e.id, split.len() > 1) {
+        if let (Some(id), true) = (e.id, split.iter().map(Vec::len).sum::<usize>() > 1) {
             pieces.insert(id, split);
         }
     }
@@ -319,9 +323,10 @@ fn clipped_line(t: &[DVec3; 3], frame: &Frame, a: DVec2, b: DVec2, tolerance: f6
     Some(Line { point: a, direction: d / d.length() })
 }
 
-/// Triangle `t` cut by every line (those along its own edges cut nothing), as triangles
-/// fanned from each convex piece; the triangle itself when nothing cuts it.
-fn split_triangle(t: &[DVec3; 3], cuts: &[Line], tolerance: f64) -> Vec<[DVec3; 3]> {
+/// Triangle `t` cut by every line (those along its own edges cut nothing), as the convex
+/// polygons the lines leave, each as the triangles fanned from it; the triangle itself when
+/// nothing cuts it.
+fn split_triangle(t: &[DVec3; 3], cuts: &[Line], tolerance: f64) -> Vec<Vec<[DVec3; 3]>> {
     let frame = Frame::of(t);
     let mut polygons: Vec<Vec<DVec2>> = vec![t.iter().map(|&p| frame.to_2d(p)).collect()];
     for line in cuts.iter().take(MAX_CUTS_PER_TRIANGLE) {
@@ -356,19 +361,23 @@ fn split_triangle(t: &[DVec3; 3], cuts: &[Line], tolerance: f64) -> Vec<[DVec3; 
         polygons = next;
     }
     if polygons.len() == 1 {
-        return vec![*t];
+        return vec![vec![*t]];
     }
-    let mut triangles = Vec::new();
+    let mut fans = Vec::new();
     for polygon in polygons {
         let polygon = without_collinear(polygon, tolerance);
+        let mut fan = Vec::new();
         for i in 1..polygon.len().saturating_sub(1) {
             let corners = [polygon[0], polygon[i], polygon[i + 1]];
             if (corners[1] - corners[0]).perp_dot(corners[2] - corners[0]) > tolerance * tolerance {
-                triangles.push(corners.map(|p| frame.to_3d(p)));
+                fan.push(corners.map(|p| frame.to_3d(p)));
             }
         }
+        if !fan.is_empty() {
+            fans.push(fan);
+        }
     }
-    triangles
+    fans
 }
 
 /// The polygon without vertices that lie on the line through their neighbours (a cut
@@ -415,7 +424,7 @@ mod tests {
             let p = frame.to_3d(line.point + line.direction * s);
             assert!((p.x - 1.0).abs() < 1e-12 && p.y.abs() < 1e-12, "{p}");
         }
-        let pieces = split_triangle(&FLOOR, &[line], 1e-9);
+        let pieces = split_triangle(&FLOOR, &[line], 1e-9).concat();
         assert!(pieces.len() >= 2);
         let total: f64 = pieces.iter().map(area).sum();
         assert!((total - area(&FLOOR)).abs() < 1e-12, "{total}");
@@ -455,7 +464,7 @@ mod tests {
         // A wall along the floor's own edge (x = 0) yields a line, but it splits nothing.
         let edge_wall = [DVec3::new(0.0, 0.0, 0.0), DVec3::new(0.0, 1.0, 0.0), DVec3::new(0.0, 0.0, 4.0)];
         let line = cut_line(&FLOOR, &edge_wall, 1e-9).expect("contact along the edge");
-        assert_eq!(split_triangle(&FLOOR, &[line], 1e-9), vec![FLOOR]);
+        assert_eq!(split_triangle(&FLOOR, &[line], 1e-9), vec![vec![FLOOR]]);
     }
 
     #[test]
@@ -478,10 +487,10 @@ mod tests {
         assert!(pieces.keys().all(|&(s, _)| s == 0), "only the floor is cut: {:?}", pieces.keys());
         let mut inside = 0.0;
         for (t, tri) in floor.iter().enumerate() {
-            let split = pieces.get(&(0, t)).expect("both floor triangles reach under the box");
+            let split = pieces.get(&(0, t)).expect("both floor triangles reach under the box").concat();
             let total: f64 = split.iter().map(area).sum();
             assert!((total - area(tri)).abs() < 1e-12);
-            for p in split {
+            for p in &split {
                 let c = (p[0] + p[1] + p[2]) / 3.0;
                 let is_inside = c.x > x0 && c.x < x1 && c.z > z0 && c.z < z1;
                 for v in p {
@@ -614,6 +623,15 @@ mod tests {
             assert_eq!(n, u32::from(surface), "{p:?}");
         }
         assert!(floor_under > 0 && floor_outside > 0);
+        // A piece is a whole convex polygon of the cuts, not each triangle fanned from it.
+        let cut = contact_pieces(&scene);
+        let fanned: usize =
+            (0..scene.surfaces[0].triangles.len()).map(|t| cut.get(&(0, t)).map_or(1, |p| p.concat().len())).sum();
+        assert!(
+            floor_under + floor_outside < fanned,
+            "{} floor pieces of {fanned} triangles",
+            floor_under + floor_outside
+        );
     }
 
     #[test]

@@ -126,12 +126,13 @@ pub struct Patches {
     pub pieces: Vec<Piece>,
 }
 
-/// The patches `first..end` that one piece of a source triangle was split into: coplanar,
-/// facing the same way, and with no contact line between them (the contact cuts bound the
-/// pieces), so a ray leaving any of them towards its front sees what one leaving a point of
-/// another right beside it sees. A two-sided surface's twins interleave (`sides` = 2): the
-/// piece's front patches are `first, first + 2, ...`, its backs `first + 1, first + 3, ...`,
-/// each a piece of its own for the gather.
+/// The patches `first..end` that one piece of a source triangle was split into (the whole
+/// triangle, or one convex polygon that the contact cuts leave of it): coplanar, facing the
+/// same way, and with no contact line between them (the contact cuts bound the pieces), so
+/// a ray leaving any of them towards its front sees what one leaving a point of another
+/// right beside it sees. A two-sided surface's twins interleave (`sides` = 2): the piece's
+/// front patches are `first, first + 2, ...`, its backs `first + 1, first + 3, ...`, each a
+/// piece of its own for the gather.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Piece {
     pub first: u32,
@@ -242,7 +243,7 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
     for (s, surface) in scene.surfaces.iter().enumerate() {
         let copies = if surface.two_sided { 2 } else { 1 };
         for (t, triangle) in surface.triangles.iter().enumerate() {
-            for source in SourceTriangle::pieces(scene, s, t, triangle, &pieces)? {
+            for source in SourceTriangle::pieces(scene, s, t, triangle, &pieces)?.iter().flatten() {
                 let k = source.splits(patch_size);
                 count = count.saturating_add(k.saturating_mul(k).saturating_mul(copies));
             }
@@ -299,18 +300,20 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
                 Some(&(emitter, side)) => PatchKind::Emitter { surface: s as u32, emitter, side },
                 None => PatchKind::Surface { surface: s as u32 },
             };
-            for source in SourceTriangle::pieces(scene, s, t, triangle, &pieces)? {
-                let base = Patch {
-                    vertices: source.vertices,
-                    normal: source.normal,
-                    area: 0.0,
-                    material: Some(triangle.material),
-                    emission: surface.emission,
-                    kind: kind(false),
-                    twin: surface.two_sided,
-                };
+            for polygon in SourceTriangle::pieces(scene, s, t, triangle, &pieces)? {
                 let first = out.patches.len() as u32;
-                source.split_into(&base, kind(true), patch_size, &mut out.patches);
+                for source in polygon {
+                    let base = Patch {
+                        vertices: source.vertices,
+                        normal: source.normal,
+                        area: 0.0,
+                        material: Some(triangle.material),
+                        emission: surface.emission,
+                        kind: kind(false),
+                        twin: surface.two_sided,
+                    };
+                    source.split_into(&base, kind(true), patch_size, &mut out.patches);
+                }
                 out.pieces.push(Piece { first, end: out.patches.len() as u32, sides: copies });
             }
         }
@@ -540,20 +543,25 @@ impl SourceTriangle {
         Ok(SourceTriangle { vertices: triangle.vertices, normal: cross.normalize(), area, longest_edge })
     }
 
-    /// The triangle, or the pieces that contact cuts (`contact.rs`) leave of it, each with
-    /// the source's own normal so that all its patches stay exactly coplanar.
-    fn pieces(scene: &Scene, s: usize, t: usize, triangle: &Triangle, pieces: &Pieces) -> Result<Vec<Self>> {
+    /// The triangle, or the convex polygons that contact cuts (`contact.rs`) leave of it,
+    /// each as the triangles fanned from it, each with the source's own normal so that all
+    /// its patches stay exactly coplanar. One polygon's patches are one `Piece`.
+    fn pieces(scene: &Scene, s: usize, t: usize, triangle: &Triangle, pieces: &Pieces) -> Result<Vec<Vec<Self>>> {
         let whole = SourceTriangle::new(scene, s, t, triangle)?;
         let Some(cut) = pieces.get(&(s, t)) else {
-            return Ok(vec![whole]);
+            return Ok(vec![vec![whole]]);
         };
         Ok(cut
             .iter()
-            .map(|&[v0, v1, v2]| SourceTriangle {
-                vertices: [v0, v1, v2],
-                normal: whole.normal,
-                area: 0.5 * (v1 - v0).cross(v2 - v0).length(),
-                longest_edge: (v1 - v0).length().max((v2 - v1).length()).max((v0 - v2).length()),
+            .map(|fan| {
+                fan.iter()
+                    .map(|&[v0, v1, v2]| SourceTriangle {
+                        vertices: [v0, v1, v2],
+                        normal: whole.normal,
+                        area: 0.5 * (v1 - v0).cross(v2 - v0).length(),
+                        longest_edge: (v1 - v0).length().max((v2 - v1).length()).max((v0 - v2).length()),
+                    })
+                    .collect()
             })
             .collect())
     }
