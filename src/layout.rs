@@ -43,9 +43,6 @@ pub const TALLY_LONG_LINES: u32 = 2;
 /// Workgroups (of 64) of bundle_transfer's `gather_long_lines`, which stride over the list of
 /// long lines: a fixed grid, since the list's length is known only on the GPU.
 pub const LONG_LINES_WORKGROUPS: u32 = 64;
-/// Workgroups (of 64) of image_estimate's `gather_edges`, which stride over the pixels the
-/// gather listed: a fixed grid, since the list's length is known only on the GPU.
-pub const EDGE_WORKGROUPS: u32 = 64;
 /// Prefix sums: invocations per workgroup, and values each scans in a run of its own (long
 /// runs keep the barrier-bound workgroup scan a small share of the work on CPU adapters).
 pub const PREFIX_SUM_WORKGROUP: u32 = 256;
@@ -389,7 +386,6 @@ pub fn wgsl_constants() -> String {
          const TALLY_LONG: u32 = {TALLY_LONG}u;\n\
          const TALLY_LONG_LINES: u32 = {TALLY_LONG_LINES}u;\n\
          const LONG_LINES_WORKGROUPS: u32 = {LONG_LINES_WORKGROUPS}u;\n\
-         const EDGE_WORKGROUPS: u32 = {EDGE_WORKGROUPS}u;\n\
          const LIGHT_POINT: u32 = {LIGHT_POINT}u;\n\
          const LIGHT_AREA: u32 = {LIGHT_AREA}u;\n\
          const LIGHT_SPOT: u32 = {LIGHT_SPOT}u;\n\

@@ -779,6 +779,7 @@ impl<'a> Renderer<'a> {
                 band_rows,
                 stride,
                 per_point,
+                crate::stages::image_estimate::list_workgroups(&ctx.summary),
                 like.map(|v| &v.estimate),
             );
             estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);

@@ -921,17 +921,18 @@ fn beside_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, cell: vec2<i
     return own_received(j, x, toward, search(line, x, s));
 }
 
-// Dispatched as EDGE_WORKGROUPS workgroups of 64: each invocation takes every
-// EDGE_INVOCATIONS-th pixel `gather` listed.
-const EDGE_INVOCATIONS: u32 = EDGE_WORKGROUPS * 64u;
+// `gather_edges` and `gather_first_bounce` run on a fixed grid of workgroups of 64 (the
+// lists' lengths are known only on the GPU; the host picks the grid for its adapter,
+// `image_estimate::list_workgroups`): each invocation takes every (64 x workgroups)-th pixel
+// listed.
 
 // G of the pixels `gather` listed in `edges`, by the nearest surface ahead of x among the
 // candidates on x's line (`nearest_received`).
 @compute @workgroup_size(64)
-fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let size = camera.size.xy;
     let listed = atomicLoad(&edges[0]);
-    for (var i = gid.x; i < listed; i += EDGE_INVOCATIONS) {
+    for (var i = gid.x; i < listed; i += groups.x * 64u) {
         let pixel = atomicLoad(&edges[2u * i + 1u]);
         let at = seen(vec2<u32>(pixel % size.x, pixel / size.x + params.first_row));
         let d = bundle.direction.xyz;
@@ -1023,10 +1024,10 @@ fn gather_weight(at: Seen, toward: vec3<f32>) -> vec3<f32> {
 // Its own pass: inlined in the gather, the direct light's code made every pixel's gather
 // three times as long on lavapipe, though few pixels need it.
 @compute @workgroup_size(64)
-fn gather_first_bounce(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn gather_first_bounce(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let size = camera.size.xy;
     let listed = atomicLoad(&near_senders[0]);
-    for (var i = gid.x; i < listed; i += EDGE_INVOCATIONS) {
+    for (var i = gid.x; i < listed; i += groups.x * 64u) {
         let pixel = atomicLoad(&near_senders[2u * i + 1u]);
         let m = atomicLoad(&near_senders[2u * i + 2u]) - 1u;
         let at = seen(vec2<u32>(pixel % size.x, pixel / size.x + params.first_row));

@@ -15,8 +15,8 @@ use crate::{Error, Result};
 pub const SPEC: KernelSpec = KernelSpec {
     stem: "image_estimate",
     visibility: wgpu::ShaderStages::COMPUTE,
-    // `direct`, `gather`: one invocation per pixel; `gather_edges`, `gather_first_bounce`:
-    // EDGE_WORKGROUPS.
+    // `direct`, `gather`: one invocation per pixel; `gather_edges`, `gather_first_bounce`: a
+    // fixed grid of `list_workgroups`.
     entry_points: &[
         compute("direct", [8, 8, 1]),
         compute("gather", [8, 8, 1]),
@@ -120,6 +120,19 @@ pub struct ImageEstimate {
     /// 1, or 2 when a step has four bundles and each gathers one pixel of every 2 x 2
     /// (`iteration::pixel_stride`): the gather's grid is this much smaller on each side.
     pixel_stride: u32,
+    /// The grid of `gather_edges` and `gather_first_bounce` (`list_workgroups`).
+    list_workgroups: u32,
+}
+
+/// Workgroups (of 64) of `gather_edges` and `gather_first_bounce`, which stride over the
+/// pixels the gather listed: a fixed grid, since the lists' lengths are known only on the
+/// GPU. A GPU needs many for lists of thousands of pixels; a CPU adapter runs a workgroup
+/// at a time on each core, and there every workgroup that loops over nothing still costs
+/// its start: with 64, `gather_first_bounce` over an empty list took 1.7 ms of its 2.7-3.2
+/// ms on lavapipe, with 8 it took 1.9 ms in all (docs/PERFORMANCE.md, "Near senders' first
+/// bounce").
+pub fn list_workgroups(adapter: &crate::gpu::AdapterSummary) -> u32 {
+    if adapter.device_type == "Cpu" { 8 } else { 64 }
 }
 
 impl ImageEstimate {
@@ -128,6 +141,7 @@ impl ImageEstimate {
     /// `pixel_stride`: `iteration::pixel_stride` of the step's bundles.
     /// `first_bounce_per_point`: the gather evaluates each sender's first reflection of the
     /// lights at the point it sees (`render::first_bounce_per_point`).
+    /// `list_workgroups`: the grid of the passes over the gather's lists (`list_workgroups`).
     /// `like`: the estimate of another view of the same render, whose kernel and pipelines
     /// this one shares (they depend on the scene's paging and lights, not on the camera).
     #[allow(clippy::too_many_arguments)]
@@ -140,6 +154,7 @@ impl ImageEstimate {
         band_rows: u32,
         pixel_stride: u32,
         first_bounce_per_point: bool,
+        list_workgroups: u32,
         like: Option<&Self>,
     ) -> Self {
         let (built, direct_pipeline, gather_pipeline, edges_pipeline, first_bounce_pipeline) = match like {
@@ -227,6 +242,7 @@ impl ImageEstimate {
             width: camera.width,
             height: camera.height,
             pixel_stride: pixel_stride.max(1),
+            list_workgroups: list_workgroups.max(1),
         }
     }
 
@@ -293,7 +309,7 @@ impl ImageEstimate {
             let groups = SPEC.grid("gather", [self.width.div_ceil(stride), block_rows]);
             let bind_groups = [&band.groups[1], &self.direct_group, &self.gather_group];
             kernel::dispatch(encoder, "firstshot.image_estimate.gather", &self.gather_pipeline, &bind_groups, groups);
-            let edges = (crate::layout::EDGE_WORKGROUPS, 1);
+            let edges = (self.list_workgroups, 1);
             kernel::dispatch(
                 encoder,
                 "firstshot.image_estimate.gather_edges",
