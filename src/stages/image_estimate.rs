@@ -168,15 +168,33 @@ impl ImageEstimate {
             None => {
                 let built = SPEC.build_paged(device, scene.paging());
                 // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
-                let direct_pipeline = built.specialized_pipeline(device, "direct", &direct.specialization());
-                let per_point = ("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64);
-                let gather_pipeline =
-                    built.specialized_pipeline(device, "gather", &[("SEEN_IN_GATHER", 1.0), per_point]);
-                let edges_pipeline = built.specialized_pipeline(device, "gather_edges", &[per_point]);
-                // The direct light at the near senders' points, compiled like `direct`.
-                let first_bounce_pipeline = first_bounce_per_point
-                    .then(|| built.specialized_pipeline(device, "gather_first_bounce", &direct.specialization()));
-                (built, direct_pipeline, gather_pipeline, edges_pipeline, first_bounce_pipeline)
+                let lights = direct.specialization();
+                let per_point = [("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)];
+                let gather = [("SEEN_IN_GATHER", 1.0), per_point[0]];
+                // Built side by side: a CPU adapter compiles each pipeline on the thread that
+                // asks for it (about 190 ms for the four on lavapipe, one after another).
+                let pipelines = std::thread::scope(|threads| {
+                    let build = |entry: &'static str, constants: &[(&'static str, f64)]| {
+                        let built = &built;
+                        let constants = constants.to_vec();
+                        threads.spawn(move || built.specialized_pipeline(device, entry, &constants))
+                    };
+                    let direct_pipeline = build("direct", &lights);
+                    let gather_pipeline = build("gather", &gather);
+                    let edges_pipeline = build("gather_edges", &per_point);
+                    // The direct light at the near senders' points, compiled like `direct`.
+                    let first_bounce_pipeline = first_bounce_per_point.then(|| build("gather_first_bounce", &lights));
+                    let join = |t: std::thread::ScopedJoinHandle<'_, wgpu::ComputePipeline>| {
+                        t.join().expect("an image estimate pipeline's build panicked")
+                    };
+                    (
+                        join(direct_pipeline),
+                        join(gather_pipeline),
+                        join(edges_pipeline),
+                        first_bounce_pipeline.map(join),
+                    )
+                });
+                (built, pipelines.0, pipelines.1, pipelines.2, pipelines.3)
             }
         };
         let band_rows = band_rows.max(1);
