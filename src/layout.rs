@@ -90,9 +90,9 @@ pub struct GpuPatch {
     /// on its triangle side stands for (T A_t, `direct_light.rs`), which gives the density
     /// of those points for multiple importance sampling (docs/ALGORITHM.md 6); else 0.
     pub light_pick_area: f32,
-    /// The patch's piece for the image's gather (`scene::Piece`, `piece_bits`): the patches
-    /// `PIECE_BEFORE` steps before it and `PIECE_AFTER` steps after it (steps of 2 with
-    /// `PIECE_TWINS`, 1 without) are its piece; 0 for a piece of its own.
+    /// The patch's piece for the image's gather (`scene::Piece`, `piece_bits`): how many
+    /// steps before and after it its piece reaches (steps of 2 patches with `PIECE_TWINS`,
+    /// of 1 without); 0 for a piece of its own.
     pub piece: u32,
 }
 

@@ -40,11 +40,11 @@ pub const MAX_CUTS_PER_TRIANGLE: usize = 64;
 
 /// Source triangles that other surfaces cut, by (surface, triangle) index: the triangles
 /// that replace each one (counter-clockwise about the same normal, areas adding up to the
-/// source's). Triangles not in the map are not cut.
-///
-/// Each cut triangle's convex polygons, each as the triangles fanned from it: no contact line
-/// runs through a polygon (every cut crosses the whole triangle), so the image's gather may
-/// treat a polygon's patches as one surface (`scene::Piece`).
+/// source's), grouped by the convex polygon of the cuts they were fanned from. Triangles not
+/// in the map are not cut. No cut line runs through a polygon (every cut crosses the whole
+/// triangle), so the image's gather treats a polygon's patches as one surface
+/// (`scene::Piece`); only past `MAX_CUTS_PER_TRIANGLE` may a contact left uncut lie inside
+/// one, as it then lies inside its patches too.
 pub type Pieces = HashMap<(usize, usize), Vec<Vec<[DVec3; 3]>>>;
 
 /// One triangle with its bounding box: a surface's (surface, triangle), or an area light's
