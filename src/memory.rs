@@ -38,10 +38,10 @@ const DEVICE_BYTES_PER_PIXEL: u64 = 2 * 32 + 8 + 8 + 8;
 /// Host bytes per pixel of a view: the image sum read back (32) and the image (rgba f32).
 const HOST_BYTES_PER_PIXEL: u64 = 32 + 16;
 /// Host bytes per patch while the scene is uploaded, besides the tessellated patch: the
-/// patch table and the triangles built for the upload, and wgpu's staging copy of each. (In a
-/// scene with a sun, `scene_buffers::smooth_edges` takes about 100 bytes a patch before them,
-/// and returns it.)
-const UPLOAD_BYTES_PER_PATCH: u64 = 2 * (96 + 3 * size_of::<RasterVertex>() as u64);
+/// patch table and the triangles built for the upload, and wgpu's staging copy of each, and
+/// the pieces' bits (`scene_buffers::piece_bits`, 4 bytes). (In a scene with a sun,
+/// `scene_buffers::smooth_edges` takes about 100 bytes a patch before them, and returns it.)
+const UPLOAD_BYTES_PER_PATCH: u64 = 2 * (96 + 3 * size_of::<RasterVertex>() as u64) + 4;
 /// The process without a scene: code, the adapter's own allocations, the shaders (a 64 x 64
 /// render of the Cornell box peaks at 160 MiB resident on lavapipe).
 const BASE_BYTES: u64 = 128 << 20;
@@ -129,7 +129,9 @@ pub fn predict(
     let n = patches.patches.len() as u64;
     let paged: u64 = PAGED_ARRAYS.iter().map(|a| a.bytes).sum();
     let device_bytes_per_patch = paged + OTHER_DEVICE_BYTES_PER_PATCH;
-    let host_bytes_per_patch = size_of::<crate::scene::Patch>() as u64 + UPLOAD_BYTES_PER_PATCH;
+    // The tessellated patch, and at most one `Piece` a patch (one per split polygon).
+    let host_bytes_per_patch =
+        (size_of::<crate::scene::Patch>() + size_of::<crate::scene::Piece>()) as u64 + UPLOAD_BYTES_PER_PATCH;
     let pixels: u64 = options.views(scene).iter().map(|v| v.camera.width as u64 * v.camera.height as u64).sum();
     let (lines, fragments) = match options.iterations {
         0 => (0, 0),
