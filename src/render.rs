@@ -501,7 +501,7 @@ pub fn predict_memory(
     patches: &Patches,
     options: &RenderOptions,
 ) -> crate::memory::MemoryPlan {
-    let cpu = ctx.summary.device_type == "Cpu";
+    let cpu = ctx.summary.is_cpu();
     let available = options.memory_limit.or_else(crate::memory::host_available);
     crate::memory::predict(scene, patches, options, &ctx.limits(), cpu, available)
 }

@@ -252,8 +252,8 @@ fn select_adapters(spec: &str, all: &[AdapterSummary]) -> Result<Vec<Slot>, Stri
     let picked = match spec.to_ascii_lowercase().as_str() {
         "all" => slots(&|_, _| true),
         "first" => slots(&|i, _| i == 0),
-        "cpu" => slots(&|_, a| a.device_type == "Cpu"),
-        "gpu" => slots(&|_, a| a.device_type != "Cpu" && a.device_type != "Other"),
+        "cpu" => slots(&|_, a| a.is_cpu()),
+        "gpu" => slots(&|_, a| !a.is_cpu() && a.device_type != "Other"),
         list => {
             let items: Vec<&str> = list.split(',').map(str::trim).filter(|s| !s.is_empty()).collect();
             slots(&|i, a| {

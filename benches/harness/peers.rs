@@ -146,7 +146,7 @@ pub fn timed(cmd: &mut Command) -> Result<f64, String> {
 /// The adapter spec to give `firstshot --adapter` for this slot: a CPU adapter by its
 /// backend (lavapipe and llvmpipe share a name), a GPU by its name.
 pub fn adapter_arg(slot: &Slot) -> String {
-    if slot.adapter.device_type == "Cpu" { slot.adapter.backend.to_lowercase() } else { slot.adapter.name.clone() }
+    if slot.adapter.is_cpu() { slot.adapter.backend.to_lowercase() } else { slot.adapter.name.clone() }
 }
 
 struct Study<'a> {
@@ -251,7 +251,7 @@ impl Study<'_> {
         let scene = firstshot::scene::load(path).map_err(|e| e.to_string())?;
         let name = path.file_stem().unwrap_or_default().to_string_lossy().into_owned();
         let size = self.size(&scene);
-        let variant = if slot.adapter.device_type == "Cpu" { "llvm_ad_rgb" } else { "cuda_ad_rgb" };
+        let variant = if slot.adapter.is_cpu() { "llvm_ad_rgb" } else { "cuda_ad_rgb" };
         if !self.python.variants.iter().any(|v| v == variant) {
             return Err(format!(
                 "this Mitsuba has no {variant} variant that runs here (llvm_ad_rgb needs libLLVM 19; cuda_ad_rgb a CUDA build)"

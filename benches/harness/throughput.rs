@@ -211,7 +211,7 @@ fn add_ratios(cases: &mut [Case]) {
             .iter()
             .filter(|c| c.scene == scene)
             .filter_map(|c| Some((c, c.measured.clone()?)))
-            .max_by_key(|(c, _)| (c.adapter.adapter.device_type == "Cpu", std::cmp::Reverse(c.adapter.index)))
+            .max_by_key(|(c, _)| (c.adapter.adapter.is_cpu(), std::cmp::Reverse(c.adapter.index)))
             .map(|(c, m)| (c.adapter.label(), m));
         let Some((label, b)) = base else { continue };
         for c in cases.iter_mut().filter(|c| c.scene == scene) {

@@ -73,6 +73,12 @@ impl AdapterSummary {
             driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
         }
     }
+
+    /// A CPU adapter (lavapipe): its "GPU" memory is the host's, and it runs a compute
+    /// workgroup at a time on each core.
+    pub fn is_cpu(&self) -> bool {
+        self.device_type == "Cpu"
+    }
 }
 
 impl fmt::Display for AdapterSummary {

@@ -280,11 +280,11 @@ pub fn piece_bits(patches: &Patches) -> Vec<u32> {
     for piece in &patches.pieces {
         let sides = piece.sides.max(1);
         let steps = (piece.end - piece.first) / sides;
+        let twins = if sides == 2 { PIECE_TWINS } else { 0 };
         for i in piece.first..piece.end {
             let at = (i - piece.first) / sides;
             let before = at.min(PIECE_REACH);
             let after = (steps - 1 - at).min(PIECE_REACH);
-            let twins = if sides == 2 { PIECE_TWINS } else { 0 };
             bits[i as usize] = twins | (before << PIECE_BEFORE_SHIFT) | after;
         }
     }

@@ -132,7 +132,7 @@ pub struct ImageEstimate {
 /// ms on lavapipe, with 8 it took 1.9 ms in all (docs/PERFORMANCE.md, "Near senders' first
 /// bounce").
 pub fn list_workgroups(adapter: &crate::gpu::AdapterSummary) -> u32 {
-    if adapter.device_type == "Cpu" { 8 } else { 64 }
+    if adapter.is_cpu() { 8 } else { 64 }
 }
 
 impl ImageEstimate {
