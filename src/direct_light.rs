@@ -454,7 +454,7 @@ impl DirectLights {
         if !kept_faces.is_empty() {
             let mut encoder = device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("firstshot.direct_light.kept") });
-            out.kept.record(&mut encoder, &buffers.vertices, buffers.patch_count, &kept_faces);
+            out.kept.record(&mut encoder, &buffers.raster, &kept_faces);
             ctx.queue.submit([encoder.finish()]);
         }
         out
@@ -544,7 +544,7 @@ impl DirectLights {
     pub fn record_pass(&self, encoder: &mut wgpu::CommandEncoder, buffers: &SceneBuffers) {
         let faces = self.faces_in(PER_PASS);
         if !faces.is_empty() {
-            self.per_pass.record(encoder, &buffers.vertices, buffers.patch_count, &faces);
+            self.per_pass.record(encoder, &buffers.raster, &faces);
         }
     }
 }

@@ -185,7 +185,7 @@ pub fn run(
                 let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("firstshot.first_shot.face"),
                 });
-                item_buffer.record_rows(&mut encoder, &buffers.vertices, buffers.patch_count, face.rows);
+                item_buffer.record_rows(&mut encoder, &buffers.raster, face.rows);
                 reduce.record_face(&mut encoder, face.rows);
                 ctx.queue.submit([encoder.finish()]);
                 face_count += 1;

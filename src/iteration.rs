@@ -537,12 +537,7 @@ impl Iteration {
                 }),
             ),
             ("reflect", Box::new(move |e: &mut wgpu::CommandEncoder| self.reflect.record(e))),
-            (
-                "visibility",
-                Box::new(move |e: &mut wgpu::CommandEncoder| {
-                    self.visibility.record(e, &scene.vertices, scene.patch_count)
-                }),
-            ),
+            ("visibility", Box::new(move |e: &mut wgpu::CommandEncoder| self.visibility.record(e, &scene.raster))),
             ("transfer", Box::new(move |e: &mut wgpu::CommandEncoder| self.transfer.record(e))),
             ("finalize", Box::new(move |e: &mut wgpu::CommandEncoder| self.finalize.record(e))),
         ]

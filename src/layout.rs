@@ -25,6 +25,14 @@ pub const SMOOTH_EDGE_COS: f32 = 0.866;
 pub const NO_PATCH: u32 = 0;
 /// Camera and cube item buffers pack the twin bit into the top bit of the vertex's patch id.
 pub const VERTEX_TWIN_BIT: u32 = 1 << 31;
+/// The lattice word of a rasterised vertex (the second vertex stream, `scene_buffers::
+/// raster_triangles`): bits 0-15 k, the source triangle's lattice side (1 for a triangle that
+/// is one patch), bits 16-17 which corner of the lattice the vertex is (0: v0 at (0, 0), 1:
+/// v1 at (k, 0), 2: v2 at (0, k)), and `LATTICE_TWINS` where the lattice's twins interleave
+/// with its patches. k <= 2^15 always: 2^25 patches at most.
+pub const LATTICE_SIDE_MASK: u32 = 0xffff;
+pub const LATTICE_CORNER_SHIFT: u32 = 16;
+pub const LATTICE_TWINS: u32 = 1 << 18;
 /// Sums that must not depend on thread order are accumulated as exact 64-bit integers
 /// (two u32 atomics) of values in [0, 1] scaled by this.
 pub const FIXED_POINT_SCALE: f32 = 2147483648.0;
@@ -380,6 +388,9 @@ pub fn wgsl_constants() -> String {
          const PIECE_BEFORE_SHIFT: u32 = {PIECE_BEFORE_SHIFT}u;\n\
          const PIECE_TWINS: u32 = {PIECE_TWINS}u;\n\
          const VERTEX_TWIN_BIT: u32 = {VERTEX_TWIN_BIT}u;\n\
+         const LATTICE_SIDE_MASK: u32 = {LATTICE_SIDE_MASK}u;\n\
+         const LATTICE_CORNER_SHIFT: u32 = {LATTICE_CORNER_SHIFT}u;\n\
+         const LATTICE_TWINS: u32 = {LATTICE_TWINS}u;\n\
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
          const LINE_BUCKET: u32 = {LINE_BUCKET}u;\n\
          const TALLY_SPILLED: u32 = {TALLY_SPILLED}u;\n\

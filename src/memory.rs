@@ -12,11 +12,12 @@ use crate::scene::{Patches, Scene};
 use crate::{Error, Result};
 use serde::Serialize;
 
-/// GPU bytes per patch besides the paged arrays: the triangles (3 `RasterVertex`), the
+/// GPU bytes per patch besides the paged arrays: the triangles (at most one a patch: 3
+/// `RasterVertex` and 3 lattice words, `scene_buffers::raster_triangles`), the
 /// first-shot row starts (4), the copy of the state kept to redo a batch of steps
 /// (`GpuPatchState`), and the two further arrays of the outgoing radiance's kind that the
 /// image reads (`iteration`: image_outgoing and image_mean_radiance).
-const OTHER_DEVICE_BYTES_PER_PATCH: u64 = 3 * size_of::<RasterVertex>() as u64
+const OTHER_DEVICE_BYTES_PER_PATCH: u64 = 3 * RASTER_VERTEX_BYTES
     + 4
     + size_of::<crate::layout::GpuPatchState>() as u64
     + 2 * crate::gpu::scene_buffers::OUTGOING.bytes;
@@ -41,7 +42,9 @@ const HOST_BYTES_PER_PIXEL: u64 = 32 + 16;
 /// patch table and the triangles built for the upload, and wgpu's staging copy of each, and
 /// the pieces' bits (`scene_buffers::piece_bits`, 4 bytes). (In a scene with a sun,
 /// `scene_buffers::smooth_edges` takes about 100 bytes a patch before them, and returns it.)
-const UPLOAD_BYTES_PER_PATCH: u64 = 2 * (96 + 3 * size_of::<RasterVertex>() as u64) + 4;
+const UPLOAD_BYTES_PER_PATCH: u64 = 2 * (96 + 3 * RASTER_VERTEX_BYTES) + 4;
+/// A rasterised vertex: its `RasterVertex` and its lattice word.
+const RASTER_VERTEX_BYTES: u64 = (size_of::<RasterVertex>() + size_of::<u32>()) as u64;
 /// The process without a scene: code, the adapter's own allocations, the shaders (a 64 x 64
 /// render of the Cornell box peaks at 160 MiB resident on lavapipe).
 const BASE_BYTES: u64 = 128 << 20;

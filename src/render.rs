@@ -224,6 +224,8 @@ pub struct RenderStats {
     pub adapter: AdapterSummary,
     pub scene: String,
     pub patches: usize,
+    /// Triangles the render passes draw for them (lattices, docs/ALGORITHM.md 4).
+    pub raster_triangles: u32,
     pub light_samples: usize,
     pub image: [u32; 2],
     pub patch_size: f64,
@@ -968,10 +970,7 @@ impl<'a> Renderer<'a> {
         let mut stages: Vec<Stage<'_>> = Vec::new();
         for (v, view) in self.views.iter().enumerate() {
             let (camera, estimate) = (&view.item_buffer, &view.estimate);
-            stages.push((
-                "camera",
-                Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.vertices, buffers.patch_count)),
-            ));
+            stages.push(("camera", Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.raster))));
             if (direct || windows_due) && v == 0 {
                 stages.push((
                     "light_windows",
@@ -1139,6 +1138,7 @@ impl<'a> Renderer<'a> {
                 adapter: self.ctx.summary.clone(),
                 scene: self.scene.source.display().to_string(),
                 patches: self.patch_count,
+                raster_triangles: self.buffers.raster.triangles,
                 light_samples: self.light_samples,
                 image: [o.width, o.height],
                 patch_size: o.patch_size,

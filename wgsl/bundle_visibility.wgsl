@@ -7,7 +7,8 @@
 // whatever the rasteriser produced.
 //
 // Render pass, no culling, no depth test, a depth-only attachment that nothing reads.
-// Vertex input: RasterVertex. A spill node past the capacity sets `overflow`: the host
+// Vertex input: the rasterised triangles (position, first patch id, lattice word:
+// `lattice_patch`). A spill node past the capacity sets `overflow`: the host
 // grows the spill list and redoes the steps.
 // Host: src/stages/bundle_visibility.rs. Its `SPEC` is the one statement of the bindings
 // (names, kinds, access); tests/kernel_bindings.rs holds it against this file.
@@ -27,12 +28,14 @@ struct VertexOut {
     @location(0) depth: f32,
     // The patch | FRAGMENT_FRONT_BIT when its front faces +d: the facing travels with the
     // fragment, so sorting and transfer need not look up the patch, and it is looked up
-    // once a vertex, not once a fragment.
+    // once a vertex, not once a fragment: all patches of a lattice share its plane.
     @location(1) @interpolate(flat) patch_id: u32,
+    @location(2) @interpolate(flat) lattice_word: u32,
+    @location(3) lattice: vec2<f32>,
 }
 
 @vertex
-fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32) -> VertexOut {
+fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32, @location(2) lattice_word: u32) -> VertexOut {
     let rel = position - bundle.centre.xyz;
     let depth = dot(rel, bundle.direction.xyz);
     var out: VertexOut;
@@ -44,6 +47,8 @@ fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32) -> Vert
     out.depth = depth;
     let id = patch_id & ~VERTEX_TWIN_BIT;
     out.patch_id = id | select(0u, FRAGMENT_FRONT_BIT, outgoing_at(id).w > 0.0);
+    out.lattice_word = lattice_word;
+    out.lattice = lattice_corner(lattice_word);
     return out;
 }
 
@@ -51,7 +56,9 @@ fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32) -> Vert
 fn fs_fill(in: VertexOut) {
     let pixel = vec2<u32>(in.clip.xy);
     let line = pixel.y * bundle.resolution + pixel.x;
-    let fragment = vec2<u32>(bitcast<u32>(in.depth), in.patch_id);
+    let front = in.patch_id & FRAGMENT_FRONT_BIT;
+    let patch_id = lattice_patch(in.patch_id & ~FRAGMENT_FRONT_BIT, in.lattice_word, in.lattice) | front;
+    let fragment = vec2<u32>(bitcast<u32>(in.depth), patch_id);
     let slot = atomicAdd(&counts[line], 1u);
     if (slot < LINE_BUCKET) {
         fragments[line * LINE_BUCKET + slot] = fragment;

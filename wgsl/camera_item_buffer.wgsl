@@ -1,8 +1,8 @@
 // Camera item buffer: which patch each camera pixel sees (docs/ALGORITHM.md 4), for this pass's
 // sub-pixel sample position.
 //
-// Render pass. Vertex input: RasterVertex (location 0 position, location 1 patch id with
-// VERTEX_TWIN_BIT).
+// Render pass. Vertex input: the rasterised triangles (location 0 position, location 1 the
+// first patch id with VERTEX_TWIN_BIT, location 2 the lattice word: `lattice_patch`).
 // Target: R32Uint patch index + 1 (NO_PATCH where nothing), Depth32Float reversed-z
 // (greater is nearer, cleared to 0). No culling: a back face is black but still occludes.
 // Invariant: the sample point (pixel + camera.jitter) lands on the rasteriser's pixel
@@ -16,13 +16,17 @@
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) @interpolate(flat) patch_id: u32,
+    @location(1) @interpolate(flat) lattice_word: u32,
+    @location(2) lattice: vec2<f32>,
 }
 
 @vertex
-fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32) -> VertexOut {
+fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32, @location(2) lattice_word: u32) -> VertexOut {
     var out: VertexOut;
     out.clip = view_clip(camera, position);
     out.patch_id = patch_id;
+    out.lattice_word = lattice_word;
+    out.lattice = lattice_corner(lattice_word);
     return out;
 }
 
@@ -32,5 +36,5 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) u3
     if (!front && (in.patch_id & VERTEX_TWIN_BIT) != 0u) {
         discard;
     }
-    return (in.patch_id & ~VERTEX_TWIN_BIT) + 1u;
+    return lattice_patch(in.patch_id & ~VERTEX_TWIN_BIT, in.lattice_word, in.lattice) + 1u;
 }

@@ -3,8 +3,8 @@
 // one face: the instance index picks the face's view, the host sets the viewport to its tile
 // and the scissor to the rows inside the window.
 //
-// Render pass. Vertex input: RasterVertex (location 0 position, location 1 patch id with
-// VERTEX_TWIN_BIT).
+// Render pass. Vertex input: the rasterised triangles (location 0 position, location 1 the
+// first patch id with VERTEX_TWIN_BIT, location 2 the lattice word: `lattice_patch`).
 // Target: R32Uint patch index + 1 (NO_PATCH where nothing), Depth32Float reversed-z (greater
 // is nearer, cleared to 0). No culling: a surface seen from its back still occludes.
 // Invariant: a face's pixel (i, j) holds the surface seen through its centre, as for the
@@ -17,12 +17,15 @@
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) @interpolate(flat) patch_id: u32,
+    @location(1) @interpolate(flat) lattice_word: u32,
+    @location(2) lattice: vec2<f32>,
 }
 
 @vertex
 fn vs_main(
     @location(0) position: vec3<f32>,
     @location(1) patch_id: u32,
+    @location(2) lattice_word: u32,
     @builtin(instance_index) face: u32,
 ) -> VertexOut {
     var out: VertexOut;
@@ -30,6 +33,8 @@ fn vs_main(
     // parallel projection.
     out.clip = view_clip(faces[face].view, position);
     out.patch_id = patch_id;
+    out.lattice_word = lattice_word;
+    out.lattice = lattice_corner(lattice_word);
     return out;
 }
 
@@ -39,5 +44,5 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) u3
     if (!front && (in.patch_id & VERTEX_TWIN_BIT) != 0u) {
         discard;
     }
-    return (in.patch_id & ~VERTEX_TWIN_BIT) + 1u;
+    return lattice_patch(in.patch_id & ~VERTEX_TWIN_BIT, in.lattice_word, in.lattice) + 1u;
 }

@@ -183,8 +183,8 @@ pub struct SceneBuffers {
     pub glossy_albedo: wgpu::Buffer,
     pub samples: wgpu::Buffer,
     pub sample_count: u32,
-    /// Three `RasterVertex` per patch, in patch order.
-    pub vertices: wgpu::Buffer,
+    /// The triangles the rasterising stages draw (`raster_triangles`).
+    pub raster: RasterMesh,
     /// `GpuPatchState` per patch (J_j, win_j).
     pub state: Paged,
     /// The first-shot factors r_ij, sparse by patch (empty until the first shot ran).
@@ -345,16 +345,88 @@ pub fn light_pick_area(patches: &Patches, p: &crate::scene::Patch, first_shot: b
     }
 }
 
-/// Three vertices per patch with the patch id (and twin bit) for the rasterising stages.
-pub fn raster_vertices(patches: &Patches) -> Vec<RasterVertex> {
-    let mut out = Vec::with_capacity(patches.patches.len() * 3);
-    for (i, p) in patches.patches.iter().enumerate() {
-        let id = i as u32 | if p.twin { VERTEX_TWIN_BIT } else { 0 };
-        for v in p.vertices {
-            out.push(RasterVertex { position: [v.x as f32, v.y as f32, v.z as f32], patch: id });
+/// The triangles the rasterising stages draw, as two vertex streams: `RasterVertex` (position
+/// and the first patch id with the twin bit) and the lattice word (`LATTICE_SIDE_MASK`,
+/// `LATTICE_CORNER_SHIFT`, `LATTICE_TWINS`).
+///
+/// Why not one triangle per patch: the CPU adapter sets up every triangle on one thread
+/// (vertex shading, clipping, binning), which made triangle count, not pixels, the cost of
+/// the bundle's visibility and the camera's and the lights' item buffers wherever patches are
+/// finer than a source triangle. So each source triangle that tessellation cut into a k x k
+/// lattice (`Patches::lattices`) is drawn once per side, and the fragment finds its patch on
+/// the lattice (`lattice_patch` in `wgsl/common/layout.wgsl`) from the lattice coordinates the
+/// rasteriser interpolates; every other patch is drawn as itself (k = 1).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RasterTriangles {
+    pub vertices: Vec<RasterVertex>,
+    pub lattice: Vec<u32>,
+}
+
+impl RasterTriangles {
+    fn push(&mut self, corners: [DVec3; 3], order: [u32; 3], patch: u32, word: u32) {
+        for (v, corner) in corners.into_iter().zip(order) {
+            self.vertices.push(RasterVertex { position: [v.x as f32, v.y as f32, v.z as f32], patch });
+            self.lattice.push(word | corner << LATTICE_CORNER_SHIFT);
         }
     }
+
+    pub fn triangle_count(&self) -> u32 {
+        (self.vertices.len() / 3) as u32
+    }
+}
+
+/// The rasterised triangles of `patches`, in patch order: a lattice's front (its front
+/// patches' winding), then its back where it has twins (the winding reversed, as the twins
+/// have it), instead of its patches.
+pub fn raster_triangles(patches: &Patches) -> RasterTriangles {
+    let mut out = RasterTriangles::default();
+    let mut lattices = patches.lattices.iter().peekable();
+    let mut i = 0usize;
+    while i < patches.patches.len() {
+        let twin = |p: &crate::scene::Patch| if p.twin { VERTEX_TWIN_BIT } else { 0 };
+        if let Some(lattice) = lattices.next_if(|l| l.first as usize == i) {
+            debug_assert!(lattice.k > 1 && lattice.k <= LATTICE_SIDE_MASK);
+            let id = i as u32 | twin(&patches.patches[i]);
+            let twins = if lattice.sides == 2 { LATTICE_TWINS } else { 0 };
+            let [v0, v1, v2] = lattice.vertices;
+            out.push([v0, v1, v2], [0, 1, 2], id, lattice.k | twins);
+            if lattice.sides == 2 {
+                out.push([v0, v2, v1], [0, 2, 1], id + 1, lattice.k | twins);
+            }
+            i += (lattice.sides * lattice.k * lattice.k) as usize;
+            continue;
+        }
+        let p = &patches.patches[i];
+        out.push(p.vertices, [0, 1, 2], i as u32 | twin(p), 1);
+        i += 1;
+    }
     out
+}
+
+/// The rasterised triangles on the GPU: `raster_triangles`' two streams, vertex buffers 0
+/// and 1 of every rasterising pipeline (`camera_item_buffer::raster_vertex_layouts`).
+pub struct RasterMesh {
+    pub vertices: wgpu::Buffer,
+    pub lattice: wgpu::Buffer,
+    pub triangles: u32,
+}
+
+impl RasterMesh {
+    pub fn new(device: &wgpu::Device, triangles: &RasterTriangles) -> Self {
+        let usage = wgpu::BufferUsages::VERTEX;
+        RasterMesh {
+            vertices: buffers::storage_init(device, "firstshot.scene.raster_vertices", &triangles.vertices, usage),
+            lattice: buffers::storage_init(device, "firstshot.scene.raster_lattice", &triangles.lattice, usage),
+            triangles: triangles.triangle_count(),
+        }
+    }
+
+    /// Draws every triangle, once per instance of `instances`.
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, instances: std::ops::Range<u32>) {
+        pass.set_vertex_buffer(0, self.vertices.slice(..));
+        pass.set_vertex_buffer(1, self.lattice.slice(..));
+        pass.draw(0..self.triangles * 3, instances);
+    }
 }
 
 /// The light-sample table.
@@ -437,12 +509,7 @@ impl SceneBuffers {
             ),
             samples: buffers::storage_init(device, "firstshot.scene.light_samples", &samples, none),
             sample_count: samples.len() as u32,
-            vertices: buffers::storage_init(
-                device,
-                "firstshot.scene.vertices",
-                &raster_vertices(patches),
-                wgpu::BufferUsages::VERTEX,
-            ),
+            raster: RasterMesh::new(device, &raster_triangles(patches)),
             state: Paged::zeroed(
                 device,
                 "firstshot.scene.patch_state",

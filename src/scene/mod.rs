@@ -17,7 +17,7 @@ use glam::DVec3;
 use std::path::PathBuf;
 
 pub use load::load;
-pub use tessellate::{LightSample, Patch, PatchKind, Patches, Piece, SampleKind, tessellate};
+pub use tessellate::{Lattice, LightSample, Patch, PatchKind, Patches, Piece, SampleKind, tessellate};
 
 /// Linear RGB, one value per channel.
 pub type Rgb = [f32; 3];

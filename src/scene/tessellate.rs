@@ -124,6 +124,26 @@ pub struct Patches {
     /// split into, in order: the image's gather treats the patches of a piece as one surface
     /// (`Piece`). Empty for patches made by hand: every patch is then a piece of its own.
     pub pieces: Vec<Piece>,
+    /// The source triangles (after the contact cuts) that `split_into` cut into a lattice of
+    /// k x k patches, k > 1, in order. The rasterising stages draw each once per side instead
+    /// of its k^2 patches (`scene_buffers::raster_triangles`); every other patch is drawn as
+    /// itself.
+    pub lattices: Vec<Lattice>,
+}
+
+/// A source triangle cut into the k x k lattice of `SourceTriangle::split_into`: its patches
+/// are `first..first + sides k^2`, row j (from v0 towards v2) after row j - 1, along a row
+/// the upright triangle at step i (from v0 towards v1) and then the inverted one beside it,
+/// a two-sided surface's twins interleaved (`sides` = 2). So the patch under lattice
+/// coordinates (x, y) = k (barycentric weights of v1, v2) is computable from (x, y) alone
+/// (`lattice_patch` in `wgsl/common/layout.wgsl`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lattice {
+    pub first: u32,
+    pub k: u32,
+    pub sides: u32,
+    /// The source triangle, in the winding of its front patches.
+    pub vertices: [DVec3; 3],
 }
 
 /// The patches `first..end` that one piece of a source triangle was split into (the whole
@@ -292,6 +312,7 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
         emitters: Vec::with_capacity(plan.emitters.len()),
         notes: plan.notes,
         pieces: Vec::new(),
+        lattices: Vec::new(),
     };
     for (s, surface) in scene.surfaces.iter().enumerate() {
         let copies = if surface.two_sided { 2 } else { 1 };
@@ -312,7 +333,11 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
                         kind: kind(false),
                         twin: surface.two_sided,
                     };
-                    source.split_into(&base, kind(true), patch_size, &mut out.patches);
+                    let first = out.patches.len() as u32;
+                    let k = source.split_into(&base, kind(true), patch_size, &mut out.patches);
+                    if k > 1 {
+                        out.lattices.push(Lattice { first, k: k as u32, sides: copies, vertices: source.vertices });
+                    }
                 }
                 out.pieces.push(Piece { first, end: out.patches.len() as u32, sides: copies });
             }
@@ -583,8 +608,9 @@ impl SourceTriangle {
 
     /// Appends the k^2 patches (and twins): on the lattice v0 + (i e1 + j e2) / k, the
     /// "upright" triangles are translates of the source scaled by 1/k and the "inverted"
-    /// ones are those rotated by 180 degrees in its plane, so all keep its winding.
-    fn split_into(&self, base: &Patch, twin_kind: PatchKind, patch_size: f64, out: &mut Vec<Patch>) {
+    /// ones are those rotated by 180 degrees in its plane, so all keep its winding. The order
+    /// is `Lattice`'s. Returns k.
+    fn split_into(&self, base: &Patch, twin_kind: PatchKind, patch_size: f64, out: &mut Vec<Patch>) -> u64 {
         let k = self.splits(patch_size);
         let [v0, v1, v2] = self.vertices;
         let kf = k as f64;
@@ -601,7 +627,7 @@ impl SourceTriangle {
         };
         if k == 1 {
             push(self.vertices);
-            return;
+            return 1;
         }
         for j in 0..k {
             for i in 0..k - j {
@@ -611,6 +637,7 @@ impl SourceTriangle {
                 }
             }
         }
+        k
     }
 }
 

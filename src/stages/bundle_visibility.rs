@@ -2,9 +2,9 @@
 //! bundle's grid, in one rasterisation pass into per-line buckets and a spill list.
 
 use crate::gpu::bindings::{Kernel, KernelSpec, Resource, fragment, read, read_write, uniform, vertex};
-use crate::gpu::scene_buffers::OUTGOING;
+use crate::gpu::scene_buffers::{OUTGOING, RasterMesh};
 use crate::layout::GpuBundle;
-use crate::stages::camera_item_buffer::raster_vertex_layout;
+use crate::stages::camera_item_buffer::raster_vertex_layouts;
 
 /// Render pass, no culling, no depth test, a depth-only attachment that nothing reads;
 /// vertex input `RasterVertex`.
@@ -58,7 +58,7 @@ impl BundleVisibility {
                     module: &built.module,
                     entry_point: Some("vs_main"),
                     compilation_options: Default::default(),
-                    buffers: &[Some(raster_vertex_layout())],
+                    buffers: &raster_vertex_layouts(),
                 },
                 primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
                 // Only so that the pass has an attachment: every fragment must run.
@@ -98,7 +98,7 @@ impl BundleVisibility {
         }
     }
 
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, vertices: &wgpu::Buffer, patch_count: u32) {
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh) {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("firstshot.bundle_visibility.fill"),
             color_attachments: &[],
@@ -113,7 +113,6 @@ impl BundleVisibility {
         });
         pass.set_pipeline(&self.fill);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.set_vertex_buffer(0, vertices.slice(..));
-        pass.draw(0..patch_count * 3, 0..1);
+        raster.draw(&mut pass, 0..1);
     }
 }

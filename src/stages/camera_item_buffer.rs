@@ -2,6 +2,7 @@
 
 use crate::gpu::bindings::{Kernel, KernelSpec, fragment, uniform, vertex};
 use crate::gpu::buffers;
+use crate::gpu::scene_buffers::RasterMesh;
 use crate::layout::{GpuCamera, RasterVertex, VIEW_ORTHOGRAPHIC};
 use crate::scene::Camera;
 use glam::DVec3;
@@ -142,24 +143,17 @@ impl CameraItemBuffer {
     }
 
     /// Records the pass: every patch rasterised with its id.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, vertices: &wgpu::Buffer, patch_count: u32) {
-        self.record_rows(encoder, vertices, patch_count, self.height);
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh) {
+        self.record_rows(encoder, raster, self.height);
     }
 
     /// As `record`, rasterising only the top `rows` rows (half faces of a hemicube).
-    pub fn record_rows(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        vertices: &wgpu::Buffer,
-        patch_count: u32,
-        rows: u32,
-    ) {
+    pub fn record_rows(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh, rows: u32) {
         let mut pass = begin_item_pass(encoder, "firstshot.camera_item_buffer.pass", &self.ids_view, &self.depth_view);
         pass.set_pipeline(&self.pipeline);
         pass.set_scissor_rect(0, 0, self.width, rows.clamp(1, self.height));
         pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.set_vertex_buffer(0, vertices.slice(..));
-        pass.draw(0..patch_count * 3, 0..1);
+        raster.draw(&mut pass, 0..1);
     }
 }
 
@@ -175,7 +169,7 @@ pub fn item_pipeline(device: &wgpu::Device, kernel: &Kernel, label: &str) -> wgp
             module: &kernel.module,
             entry_point: Some("vs_main"),
             compilation_options: Default::default(),
-            buffers: &[Some(raster_vertex_layout())],
+            buffers: &raster_vertex_layouts(),
         },
         primitive: wgpu::PrimitiveState {
             topology: wgpu::PrimitiveTopology::TriangleList,
@@ -233,12 +227,22 @@ pub fn begin_item_pass<'e>(
     })
 }
 
-/// The vertex layout of `RasterVertex`, shared by every rasterising stage.
-pub fn raster_vertex_layout() -> wgpu::VertexBufferLayout<'static> {
-    const ATTRIBUTES: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32];
-    wgpu::VertexBufferLayout {
-        array_stride: std::mem::size_of::<RasterVertex>() as u64,
-        step_mode: wgpu::VertexStepMode::Vertex,
-        attributes: &ATTRIBUTES,
-    }
+/// The vertex layouts of the rasterised triangles (`scene_buffers::RasterMesh`), shared by
+/// every rasterising stage: buffer 0 `RasterVertex` (locations 0 position, 1 patch id),
+/// buffer 1 the lattice word (location 2).
+pub fn raster_vertex_layouts() -> [Option<wgpu::VertexBufferLayout<'static>>; 2] {
+    const VERTEX: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32];
+    const LATTICE: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![2 => Uint32];
+    [
+        Some(wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<RasterVertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &VERTEX,
+        }),
+        Some(wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<u32>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &LATTICE,
+        }),
+    ]
 }

@@ -2,6 +2,7 @@
 //! face a tile of one atlas texture, for the per-pixel direct light.
 
 use crate::gpu::bindings::{KernelSpec, fragment, read, vertex};
+use crate::gpu::scene_buffers::RasterMesh;
 use crate::layout::GpuWindowFace;
 use crate::stages::camera_item_buffer::{DEPTH_FORMAT, ID_FORMAT, begin_item_pass, item_pipeline};
 
@@ -61,23 +62,16 @@ impl WindowAtlas {
     /// Records one pass that clears the whole atlas and renders every patch into each of
     /// `faces` (index into the face table, and the face): one draw per face, the viewport on
     /// its tile, the scissor on its rows.
-    pub fn record(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        vertices: &wgpu::Buffer,
-        patch_count: u32,
-        faces: &[(u32, GpuWindowFace)],
-    ) {
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh, faces: &[(u32, GpuWindowFace)]) {
         let mut pass = begin_item_pass(encoder, "firstshot.light_window.pass", &self.ids_view, &self.depth_view);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.set_vertex_buffer(0, vertices.slice(..));
         for (index, face) in faces {
             let [x, y, rows, _] = face.tile;
             let side = face.view.size[0];
             pass.set_viewport(x as f32, y as f32, side as f32, side as f32, 0.0, 1.0);
             pass.set_scissor_rect(x, y, side, rows.clamp(1, side));
-            pass.draw(0..patch_count * 3, *index..*index + 1);
+            raster.draw(&mut pass, *index..*index + 1);
         }
     }
 }

@@ -183,6 +183,28 @@ fn view_clip(view: Camera, position: vec3<f32>) -> vec4<f32> {
     return vec4<f32>(window.x / view.right.w + shift.x * z, window.y / view.up.w + shift.y * z, view.forward.w, z);
 }
 
+// A rasterised triangle's vertex on its lattice (src/gpu/scene_buffers.rs, `raster_triangles`):
+// (0, 0), (k, 0) or (0, k) for corner 0, 1 or 2 of the lattice word.
+fn lattice_corner(word: u32) -> vec2<f32> {
+    let k = f32(word & LATTICE_SIDE_MASK);
+    let corner = (word >> LATTICE_CORNER_SHIFT) & 3u;
+    return vec2<f32>(select(0.0, k, corner == 1u), select(0.0, k, corner == 2u));
+}
+
+// The patch under lattice coordinates `at` of a triangle drawn for the patches from `first`
+// (src/scene/tessellate.rs, `Lattice`): row j = floor(y) holds 2 (k - j) - 1 patches, so
+// (2 k - j) j come before it; along it the upright triangle of step i = floor(x), then the
+// inverted one where frac(x) + frac(y) > 1. Coordinates a rounding outside the triangle
+// are clamped onto its nearest patch. A triangle that is one patch (k = 1) gives `first`.
+fn lattice_patch(first: u32, word: u32, at: vec2<f32>) -> u32 {
+    let k = word & LATTICE_SIDE_MASK;
+    let j = min(u32(max(at.y, 0.0)), k - 1u);
+    let i = min(u32(max(at.x, 0.0)), k - 1u - j);
+    let inverted = (at.x - f32(i)) + (at.y - f32(j)) > 1.0 && i + j + 2u <= k;
+    let local = (2u * k - j) * j + 2u * i + select(0u, 1u, inverted);
+    return first + select(1u, 2u, (word & LATTICE_TWINS) != 0u) * local;
+}
+
 fn patch_centre(p: Patch) -> vec3<f32> {
     return (p.v0.xyz + p.v1.xyz + p.v2.xyz) / 3.0;
 }
