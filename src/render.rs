@@ -418,13 +418,25 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
     if n > MAX_PATCHES as u64 {
         return Err(Error::Limits(format!("{n} patches exceed the limit of {MAX_PATCHES}; use a larger --patch-size")));
     }
-    // Every kernel's storage bindings, the pages of the paged arrays included.
+    // Every kernel's storage bindings: the pages of the paged arrays count where the scene
+    // needs more than one (an adapter with few storage buffers a stage, such as wgpu's GL
+    // backend with 16, runs scenes whose per-patch arrays fit one binding each).
     let per_stage = limits.max_storage_buffers_per_shader_stage;
-    if let Some(spec) = crate::stages::SPECS.iter().find(|s| crate::gpu::bindings::storage_buffers(s) > per_stage) {
+    let page = crate::gpu::scene_buffers::page_bytes(limits, options.page_bytes);
+    let array_bytes: Vec<u64> = crate::gpu::scene_buffers::PAGED_ARRAYS.iter().map(|a| a.bytes).collect();
+    let paging = crate::gpu::kernel::Paging::of(n, &array_bytes, page);
+    let count = |s: &&crate::gpu::bindings::KernelSpec| crate::gpu::bindings::storage_buffers(s, paging);
+    if let Some(spec) = crate::stages::SPECS.iter().find(|s| count(s) > per_stage) {
+        let fix = match paging {
+            crate::gpu::kernel::Paging::Paged => {
+                "use a larger --patch-size, so that each per-patch array fits one binding and its pages need not be bound, or an adapter that allows more"
+            }
+            crate::gpu::kernel::Paging::Whole => "use an adapter that allows more",
+        };
         return Err(Error::Limits(format!(
-            "the kernel {} binds {} storage buffers (the pages of its per-patch arrays included), the device allows {per_stage} per shader stage (max_storage_buffers_per_shader_stage); use an adapter that allows more",
+            "the kernel {} binds {} storage buffers (the pages of its per-patch arrays included), the device allows {per_stage} per shader stage (max_storage_buffers_per_shader_stage); {fix}",
             spec.stem,
-            crate::gpu::bindings::storage_buffers(spec)
+            count(&spec)
         )));
     }
     let fewer = "use a larger --patch-size (or a coarser tessellation) or a GPU with more memory";
@@ -446,7 +458,8 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
     // The rest are one buffer each: the first shot's sums (8 bytes a patch) and row counts
     // one binding, the triangles a vertex buffer (never bound as storage).
     fit("the first shot's per-patch sums", n * 8, fewer)?;
-    let triangles = n * 3 * std::mem::size_of::<RasterVertex>() as u64;
+    let triangles =
+        crate::gpu::scene_buffers::raster_triangle_count(patches) * 3 * std::mem::size_of::<RasterVertex>() as u64;
     if triangles > buffer {
         return Err(Error::Limits(format!(
             "the rasterised triangles need {triangles} bytes in one vertex buffer, the device allows {buffer} (max_buffer_size); {fewer}"

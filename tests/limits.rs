@@ -102,13 +102,40 @@ fn test03_the_per_patch_arrays_fit_their_pages_exactly_at_the_limit() {
     // The same through the test knob that emulates a smaller device.
     let knob = RenderOptions { page_bytes: Some(bytes - 1), ..options.clone() };
     refused(check_limits(&defaults(), &patches, &knob), &[largest, "--patch-size"]);
-    // The triangles are one vertex buffer, limited by the largest buffer only.
+    // The triangles are one vertex buffer, limited by the largest buffer only: the lattices'
+    // triangles, not one a patch (90 for the Cornell box's 6 065 patches).
+    let raster = firstshot::gpu::scene_buffers::raster_triangles(&patches);
+    assert_eq!(raster.triangle_count() as u64, firstshot::gpu::scene_buffers::raster_triangle_count(&patches));
+    assert!((raster.triangle_count() as usize) < n / 10, "{} triangles for {n} patches", raster.triangle_count());
+    // Without its lattices every patch is a triangle of its own: a buffer one byte short of
+    // them refuses the scene (the pages, 8 to an array, still fit).
+    let unlattice = Patches { lattices: Vec::new(), ..patches.clone() };
     let triangles = n as u64 * 3 * size_of::<RasterVertex>() as u64;
     let buffer = wgpu::Limits { max_buffer_size: triangles - 1, ..defaults() };
-    refused(check_limits(&buffer, &patches, &options), &["the rasterised triangles", "max_buffer_size"]);
+    refused(check_limits(&buffer, &unlattice, &options), &["the rasterised triangles", "max_buffer_size"]);
+    check_limits(&buffer, &patches, &options).expect("the lattices' triangles fit");
     // A device with too few storage buffers per stage for the pages cannot run the kernels.
     let few = wgpu::Limits { max_storage_buffers_per_shader_stage: 8, ..defaults() };
     refused(check_limits(&few, &patches, &options), &["storage buffers", "max_storage_buffers_per_shader_stage"]);
+}
+
+#[test]
+fn test07_sixteen_storage_buffers_a_stage_run_a_scene_whose_arrays_fit_one_binding() {
+    // wgpu's GL backend allows 16 storage buffers a shader stage, fewer than the kernels'
+    // pages. Where every per-patch array fits one binding the kernels bind only their first
+    // page (`Paging::Whole`), and every kernel fits in 16: the run goes ahead. Where the
+    // arrays need pages (a smaller binding, emulated by the page knob), it is refused with
+    // the fix.
+    let (patches, options) = cornell_box();
+    let gl = wgpu::Limits { max_storage_buffers_per_shader_stage: 16, ..defaults() };
+    check_limits(&gl, &patches, &options).expect("one page per array: 16 storage buffers a stage suffice");
+    for spec in firstshot::stages::SPECS {
+        let whole = firstshot::gpu::bindings::storage_buffers(spec, firstshot::gpu::kernel::Paging::Whole);
+        assert!(whole <= 16, "{} binds {whole} storage buffers with every array in one page", spec.stem);
+    }
+    let (_, bytes) = smallest_binding(&patches);
+    let paged = RenderOptions { page_bytes: Some(bytes), ..options };
+    refused(check_limits(&gl, &patches, &paged), &["storage buffers", "16 per shader stage", "--patch-size"]);
 }
 
 #[test]

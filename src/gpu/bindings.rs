@@ -73,13 +73,15 @@ pub fn entries(bindings: &[Binding], paging: kernel::Paging) -> Vec<Entry> {
     out
 }
 
-/// Storage buffers a kernel binds (every page counted), which a device limits per stage.
-pub fn storage_buffers(spec: &KernelSpec) -> u32 {
+/// Storage buffers a kernel binds, which a device limits per stage: with `Paging::Paged` every
+/// page of a paged array counts, with `Paging::Whole` (every array in one page) only the first
+/// is bound (`entries`).
+pub fn storage_buffers(spec: &KernelSpec, paging: kernel::Paging) -> u32 {
     spec.groups
         .iter()
         .flat_map(|g| g.iter())
         .filter(|b| matches!(b.kind, BindKind::Storage { .. }))
-        .map(|b| b.pages)
+        .map(|b| if paging == kernel::Paging::Paged { b.pages } else { 1 })
         .sum()
 }
 

@@ -345,6 +345,13 @@ pub fn light_pick_area(patches: &Patches, p: &crate::scene::Patch, first_shot: b
     }
 }
 
+/// How many triangles `raster_triangles` draws for `patches`, without building them: one a
+/// patch, less each lattice's patches but its one triangle a side.
+pub fn raster_triangle_count(patches: &Patches) -> u64 {
+    let saved: u64 = patches.lattices.iter().map(|l| u64::from(l.sides) * (u64::from(l.k).pow(2) - 1)).sum();
+    patches.patches.len() as u64 - saved
+}
+
 /// The triangles the rasterising stages draw, as two vertex streams: `RasterVertex` (position
 /// and the first patch id with the twin bit) and the lattice word (`LATTICE_SIDE_MASK`,
 /// `LATTICE_CORNER_SHIFT`, `LATTICE_TWINS`).
