@@ -436,7 +436,7 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
         return Err(Error::Limits(format!(
             "the kernel {} binds {} storage buffers (the pages of its per-patch arrays included), the device allows {per_stage} per shader stage (max_storage_buffers_per_shader_stage); {fix}",
             spec.stem,
-            count(&spec)
+            count(spec)
         )));
     }
     let fewer = "use a larger --patch-size (or a coarser tessellation) or a GPU with more memory";
