@@ -356,8 +356,8 @@ pub fn raster_triangle_count(patches: &Patches) -> u64 {
 /// and the first patch id with the twin bit) and the lattice word (`LATTICE_SIDE_MASK`,
 /// `LATTICE_CORNER_SHIFT`, `LATTICE_TWINS`).
 ///
-/// Why not one triangle per patch: the CPU adapter sets up every triangle on one thread
-/// (vertex shading, clipping, binning), which made triangle count, not pixels, the cost of
+/// Why not one triangle per patch: the CPU adapter sets up and bins every triangle inside the
+/// view on one thread, which made triangle count, not pixels, the cost of
 /// the bundle's visibility and the camera's and the lights' item buffers wherever patches are
 /// finer than a source triangle. So each source triangle that tessellation cut into a k x k
 /// lattice (`Patches::lattices`) is drawn once per side, and the fragment finds its patch on
