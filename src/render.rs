@@ -423,8 +423,7 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
     // backend with 16, runs scenes whose per-patch arrays fit one binding each).
     let per_stage = limits.max_storage_buffers_per_shader_stage;
     let page = crate::gpu::scene_buffers::page_bytes(limits, options.page_bytes);
-    let array_bytes: Vec<u64> = crate::gpu::scene_buffers::PAGED_ARRAYS.iter().map(|a| a.bytes).collect();
-    let paging = crate::gpu::kernel::Paging::of(n, &array_bytes, page);
+    let paging = crate::gpu::scene_buffers::paging_of(n, page);
     let count = |s: &&crate::gpu::bindings::KernelSpec| crate::gpu::bindings::storage_buffers(s, paging);
     if let Some(spec) = crate::stages::SPECS.iter().find(|s| count(s) > per_stage) {
         let fix = match paging {
@@ -442,7 +441,6 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
     let fewer = "use a larger --patch-size (or a coarser tessellation) or a GPU with more memory";
     // The per-patch arrays of more than 8 bytes a patch are split over pages, a buffer each
     // (`scene_buffers::PerPatch`): at most `pages` of them.
-    let page = crate::gpu::scene_buffers::page_bytes(limits, options.page_bytes);
     for array in crate::gpu::scene_buffers::PAGED_ARRAYS {
         let capacity = array.capacity(page);
         if n > capacity {

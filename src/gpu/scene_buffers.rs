@@ -389,8 +389,8 @@ pub fn raster_triangles(patches: &Patches) -> RasterTriangles {
     let mut out = RasterTriangles::default();
     let mut lattices = patches.lattices.iter().peekable();
     let mut i = 0usize;
+    let twin = |p: &crate::scene::Patch| if p.twin { VERTEX_TWIN_BIT } else { 0 };
     while i < patches.patches.len() {
-        let twin = |p: &crate::scene::Patch| if p.twin { VERTEX_TWIN_BIT } else { 0 };
         if let Some(lattice) = lattices.next_if(|l| l.first as usize == i) {
             debug_assert!(lattice.k > 1 && lattice.k <= LATTICE_SIDE_MASK);
             let id = i as u32 | twin(&patches.patches[i]);
@@ -478,12 +478,17 @@ pub fn bounding_sphere(patches: &Patches) -> (DVec3, f64) {
     (centre, radius.max(1e-9))
 }
 
+/// How kernels reach the per-patch arrays (`PAGED_ARRAYS`) of `patch_count` patches in pages
+/// of `page_bytes`: `Paging::Whole` when each fits in one page.
+pub fn paging_of(patch_count: u64, page_bytes: u64) -> crate::gpu::kernel::Paging {
+    let bytes: Vec<u64> = PAGED_ARRAYS.iter().map(|a| a.bytes).collect();
+    crate::gpu::kernel::Paging::of(patch_count, &bytes, page_bytes)
+}
+
 impl SceneBuffers {
-    /// How kernels reach the per-patch arrays of this scene (`PAGED_ARRAYS`, all in pages of
-    /// `page_bytes`): `Paging::Whole` when each fits in one page.
+    /// How kernels reach the per-patch arrays of this scene (`paging_of`).
     pub fn paging(&self) -> crate::gpu::kernel::Paging {
-        let bytes: Vec<u64> = PAGED_ARRAYS.iter().map(|a| a.bytes).collect();
-        crate::gpu::kernel::Paging::of(self.patch_count as u64, &bytes, self.page_bytes)
+        paging_of(self.patch_count as u64, self.page_bytes)
     }
 
     pub fn new(device: &wgpu::Device, scene: &Scene, patches: &Patches, first_shot: bool) -> SceneBuffers {
