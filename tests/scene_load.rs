@@ -942,3 +942,39 @@ f 3 2 1
     assert_contains(&message, "Kd must be <= 1");
     assert_contains(&message, "shapes[0]");
 }
+
+#[test]
+fn test24_sharp_glossy_lobes_get_a_note() {
+    // A max-Phong material sharper than the iteration samples well (shininess above
+    // SHARP_LOBE_SHININESS) and bright enough to show it gets a note naming the file, the
+    // material, its shininess and where the docs explain it; a lobe of the shipped scenes'
+    // kind (60), a sharp but dim one (reflecting 0.3 % at normal incidence) and the
+    // threshold itself do not.
+    let phong = |name: &str, ks: f64, n: f64| {
+        format!(
+            "[materials.{name}]\ntype = \"phong\"\ndiffuse = [0.2, 0.2, 0.2]\nspecular = [{ks}, {ks}, {ks}]\nshininess = {n}\n\n"
+        )
+    };
+    // ks (n + 2) / (2 pi) keeps the lobe's albedo at normal incidence near 1/2.
+    let half = |n: f64| 0.5 * (n + 2.0) / (2.0 * std::f64::consts::PI);
+    let materials = [
+        phong("broad", half(60.0), 60.0),
+        phong("at_threshold", half(200.0), 200.0),
+        phong("mirror", half(2000.0), 2000.0),
+        phong("dim", 1.0, 2000.0),
+    ]
+    .concat();
+    let text = edited(&[("[materials.white]", &format!("{materials}[materials.white]"))]);
+    let scene = load_str(&text, source()).unwrap();
+    assert_eq!(scene.notes.len(), 1, "{:?}", scene.notes);
+    let note = &scene.notes[0];
+    for part in ["memory/scene.toml", "material \"mirror\"", "shininess 2000", "reflects 0.5", "\"Sharp lobes\""] {
+        assert_contains(note, part);
+    }
+    assert_eq!(firstshot::scene::load::SHARP_LOBE_SHININESS, 200.0);
+    // None of the shipped scenes has such a lobe.
+    for name in ["cornell_box", "cornell_point", "sierpinski", "sun_room", "cornell_emissive"] {
+        let scene = load(&common::scenes::shipped(name)).unwrap();
+        assert!(scene.notes.iter().all(|n| !n.contains("shininess")), "{name}: {:?}", scene.notes);
+    }
+}

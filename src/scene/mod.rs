@@ -41,7 +41,8 @@ pub struct Scene {
     pub surfaces: Vec<Surface>,
     pub lights: Vec<Light>,
     /// What the loader read but does not render (a glTF texture, an MTL transparency, a
-    /// Ks scaled down to conserve energy): one line each, printed as `note: ...`.
+    /// Ks scaled down to conserve energy) and each glossy lobe sharper than the method
+    /// samples well (`load::SHARP_LOBE_SHININESS`): one line each, printed as `note: ...`.
     pub notes: Vec<String>,
 }
 
