@@ -265,6 +265,9 @@ pub struct RenderStats {
     pub upload_ms: f64,
     pub image_ms: f64,
     pub total_ms: f64,
+    /// The scene's notes (`Scene::notes`): what it holds that is not rendered, and glossy
+    /// lobes sharper than the method samples well; `note: ...` on stderr too.
+    pub notes: Vec<String>,
 }
 
 /// The rendered image and how it was made.
@@ -1177,6 +1180,7 @@ impl<'a> Renderer<'a> {
                 upload_ms: self.upload_ms,
                 image_ms,
                 total_ms: milliseconds(self.start),
+                notes: self.scene.notes.clone(),
             },
         })
     }

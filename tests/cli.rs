@@ -147,7 +147,7 @@ fn test03_no_first_shot_with_a_point_light_is_a_usage_error() {
 }
 
 /// The stats keys of CLI.md.
-const STATS_KEYS: [&str; 14] = [
+const STATS_KEYS: [&str; 15] = [
     "adapter",
     "patches",
     "memory",
@@ -162,6 +162,7 @@ const STATS_KEYS: [&str; 14] = [
     "iteration_ms_median",
     "total_ms",
     "seed",
+    "notes",
 ];
 
 #[test]
@@ -224,6 +225,7 @@ fn test04_tiny_render_writes_exr_png_and_stats() {
     assert_eq!(json["light_samples"], 9);
     assert_eq!(json["first_shot"], true);
     assert_eq!(json["iterations"], 0);
+    assert_eq!(json["notes"], serde_json::json!([]), "the Cornell box has nothing to note");
     assert!(json["patches"].as_u64().is_some_and(|n| n > 0), "{text}");
     for key in ["first_shot_ms", "iteration_ms_median", "total_ms"] {
         assert!(json[key].as_f64().is_some_and(|ms| ms >= 0.0), "{key}:\n{text}");
@@ -416,4 +418,43 @@ fn test09_gl_adapter_renders_what_vulkan_renders() {
     // The same scene, seed and steps: only rounding and the rasterisers' tie rules differ.
     let error = firstshot::image::image_error(&images[0], &images[1]).unwrap();
     assert!(error.relative_rmse < 0.01, "GL against Vulkan: {error:?}");
+}
+
+#[test]
+fn test10_a_sharp_glossy_lobe_is_noted_on_stderr_and_in_the_stats() {
+    // A max-Phong floor of shininess 2000 reflecting about half the light
+    // (SCENE_FORMAT.md, max-Phong): the run goes on, with one `note:` line naming the scene
+    // and the material, and the same note in the statistics; --quiet hides the line only.
+    if common::gpu().is_none() {
+        return;
+    }
+    let scratch = Scratch::new("cli", "sharp-lobe");
+    let scene = scratch.dir("scene").join("mirror.toml");
+    let floor = "[materials.white]\ntype = \"phong\"\ndiffuse = [0.1, 0.1, 0.1]\nspecular = [160.0, 160.0, 160.0]\nshininess = 2000.0";
+    std::fs::write(&scene, edited(&[("[materials.white]\ntype = \"diffuse\"\nalbedo = [0.5, 0.5, 0.5]", floor)]))
+        .expect("write the scene");
+    for quiet in [false, true] {
+        let dir = scratch.dir(if quiet { "quiet" } else { "loud" });
+        let (exr, stats) = (dir.join("m.exr").display().to_string(), dir.join("s.json"));
+        let mut args = vec![scene.to_str().unwrap(), "--iterations", "0", "--width", "16", "--height", "16"];
+        args.extend(["--hemicube-resolution", "64", "--out", &exr, "--stats", stats.to_str().unwrap()]);
+        if quiet {
+            args.push("--quiet");
+        }
+        let o = firstshot(&args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(0), "stderr:\n{err}");
+        let noted: Vec<&str> = err.lines().filter(|l| l.starts_with("note: ")).collect();
+        assert_eq!(noted.len(), usize::from(!quiet), "stderr:\n{err}");
+        let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        let notes = json["notes"].as_array().expect("notes");
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        let note = notes[0].as_str().unwrap();
+        for part in ["mirror.toml", "material \"white\"", "shininess 2000", "Sharp lobes"] {
+            assert!(note.contains(part), "{note}");
+        }
+        if !quiet {
+            assert_eq!(noted[0], format!("note: {note}"));
+        }
+    }
 }
