@@ -311,9 +311,13 @@ const SHARP_LOBE_ALBEDO: f64 = 0.05;
 /// reflects a visible share of the light: it renders right, but its speckles fade slowly.
 fn sharp_lobe_note(source: &Path, m: &Material) -> Option<String> {
     let MaterialKind::Phong { diffuse, shininess, .. } = m.kind else { return None };
+    if shininess <= SHARP_LOBE_SHININESS {
+        return None;
+    }
+    // Only for a sharp lobe: the albedo is a quadrature, and every max-Phong material loads.
     let at_normal = super::brdf::directional_albedo(&m.kind, 1.0);
     let lobe = (0..3).map(|c| at_normal[c] - f64::from(diffuse[c])).fold(0.0, f64::max);
-    if shininess <= SHARP_LOBE_SHININESS || lobe < SHARP_LOBE_ALBEDO {
+    if lobe < SHARP_LOBE_ALBEDO {
         return None;
     }
     // Half the lobe's peak at psi = acos(2^(-1 / n)) from the mirror direction.
