@@ -771,6 +771,54 @@ fn test16_out_folder_writes_inside_it() {
 }
 
 // ---------------------------------------------------------------------------------------
+// 8. Devices opened and closed by several threads at once.
+
+/// A program (a test suite run by `cargo test`, a tool rendering views in threads) may open
+/// and close devices from several threads at once. NVIDIA's Linux driver deadlocked when
+/// they did (an H100 hung the views tests of four threads every time), so `Context` opens
+/// and releases devices one at a time. Eight threads each open, use and close three: all
+/// must finish, and a hang fails the test after two minutes instead of eating CI's time.
+#[test]
+fn test18_threads_open_and_close_devices_at_once() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let choice: firstshot::gpu::AdapterChoice = std::env::var("FIRSTSHOT_TEST_ADAPTER")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(firstshot::gpu::AdapterChoice::Auto);
+    let (done, finished) = mpsc::channel();
+    let start = std::sync::Arc::new(std::sync::Barrier::new(8));
+    for thread in 0..8u32 {
+        let (done, start, choice) = (done.clone(), start.clone(), choice.clone());
+        std::thread::spawn(move || {
+            start.wait();
+            for round in 0..3u32 {
+                let ctx = firstshot::gpu::Context::new(&choice).expect("opening a device");
+                let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("test18"),
+                    size: 16,
+                    usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::STORAGE,
+                    mapped_at_creation: false,
+                });
+                ctx.queue.write_buffer(&buffer, 0, &[thread as u8, round as u8, 0, 0]);
+                ctx.queue.submit([]);
+                ctx.wait().expect("waiting for the device");
+            }
+            done.send(thread).unwrap();
+        });
+    }
+    let mut seen = Vec::new();
+    for _ in 0..8 {
+        match finished.recv_timeout(Duration::from_secs(120)) {
+            Ok(thread) => seen.push(thread),
+            Err(e) => panic!("threads {seen:?} finished; the others did not within 2 minutes ({e}): a deadlock"),
+        }
+    }
+    seen.sort_unstable();
+    assert_eq!(seen, (0..8).collect::<Vec<_>>());
+}
+
+// ---------------------------------------------------------------------------------------
 // The contract under random flag values.
 
 use proptest::prelude::*;

@@ -4,7 +4,8 @@
 use crate::{Error, Result};
 use serde::Serialize;
 use std::fmt;
-use std::sync::{Arc, Mutex};
+use std::mem::ManuallyDrop;
+use std::sync::{Arc, Mutex, MutexGuard};
 
 /// What `--adapter` asks for.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -89,14 +90,28 @@ impl fmt::Display for AdapterSummary {
 
 /// A device and its queue on the chosen adapter.
 pub struct Context {
-    pub adapter: wgpu::Adapter,
-    pub device: wgpu::Device,
-    pub queue: wgpu::Queue,
+    // ManuallyDrop: `Drop for Context` releases them under DRIVER_LOCK.
+    pub adapter: ManuallyDrop<wgpu::Adapter>,
+    pub device: ManuallyDrop<wgpu::Device>,
+    pub queue: ManuallyDrop<wgpu::Queue>,
     pub summary: AdapterSummary,
     /// The first GPU error (validation, out of memory, device lost) reported since the last
     /// `check`: wgpu reports these asynchronously, so the run collects them instead of
     /// aborting, and `check` turns them into an `Error::Gpu`.
     gpu_error: Arc<Mutex<Option<String>>>,
+}
+
+/// Held while an instance, its adapters and a device are made or released. NVIDIA's Linux
+/// driver can deadlock when threads of one process do this at the same time (its Vulkan
+/// and EGL devices are opened while the adapters are listed): an H100 hung the views tests
+/// of four threads in a futex, every time, while each test alone passed (docs/PERFORMANCE.md,
+/// "Fifth run"). One at a time costs a run nothing: it opens one device.
+static DRIVER_LOCK: Mutex<()> = Mutex::new(());
+
+/// The driver lock; a thread that panicked holding it left nothing half-made that the next
+/// one could trip on (wgpu's own objects clean up on drop), so a poisoned lock is taken too.
+fn driver_lock() -> MutexGuard<'static, ()> {
+    DRIVER_LOCK.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
 fn instance() -> wgpu::Instance {
@@ -131,6 +146,7 @@ fn preference(info: &wgpu::AdapterInfo) -> (u8, u8) {
 
 /// Every adapter wgpu finds, in the order `auto` prefers them.
 pub fn list_adapters() -> Vec<AdapterSummary> {
+    let _driver = driver_lock();
     sorted_adapters(&instance()).iter().map(|a| AdapterSummary::of(&a.get_info())).collect()
 }
 
@@ -169,6 +185,7 @@ impl Context {
     /// such as the benchmark harness ask for timestamp queries); `features()` says which
     /// were enabled. Nothing in the library depends on them.
     pub fn new_with_features(choice: &AdapterChoice, wanted: wgpu::Features) -> Result<Context> {
+        let _driver = driver_lock();
         Self::open(&instance(), choice, wanted, None)
     }
 
@@ -179,6 +196,7 @@ impl Context {
     where
         W: wgpu::WindowHandle + wgpu::rwh::HasDisplayHandle + Clone + std::fmt::Debug + 'static,
     {
+        let _driver = driver_lock();
         let instance = instance_for(wgpu::InstanceDescriptor::new_with_display_handle(Box::new(window.clone())));
         let surface = instance
             .create_surface(window)
@@ -227,7 +245,13 @@ impl Context {
                             record(&slot, format!("the device was lost ({reason:?}): {message}"));
                         }
                     });
-                    return Ok(Context { adapter, device, queue, summary, gpu_error });
+                    return Ok(Context {
+                        adapter: ManuallyDrop::new(adapter),
+                        device: ManuallyDrop::new(device),
+                        queue: ManuallyDrop::new(queue),
+                        summary,
+                        gpu_error,
+                    });
                 }
                 Err(e) => failures.push(format!("{summary}: {e}")),
             }
@@ -278,6 +302,18 @@ impl Context {
         match self.gpu_error.lock().map(|mut e| e.take()) {
             Ok(Some(message)) => Err(Error::Gpu(message)),
             _ => Ok(()),
+        }
+    }
+}
+
+impl Drop for Context {
+    fn drop(&mut self) {
+        let _driver = driver_lock();
+        // SAFETY: each field is taken once, here, and never used again.
+        unsafe {
+            ManuallyDrop::drop(&mut self.queue);
+            ManuallyDrop::drop(&mut self.device);
+            ManuallyDrop::drop(&mut self.adapter);
         }
     }
 }
