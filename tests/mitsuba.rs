@@ -210,13 +210,83 @@ position = [0.0, 3.0, 0.0]
 power = [10.0, 10.0, 10.0]
 "#;
     let path = dir.join("every_shape.toml");
-    std::fs::write(&path, toml).unwrap();
+    std::fs::write(&path, format!("{toml}{GLTF_SHAPES}")).unwrap();
+    std::fs::write(dir.join("meshes/model.glb"), gltf_model()).unwrap();
     path
 }
+
+/// Two `gltf` shapes of `gltf_model`: its own materials under a placement, and a `material`
+/// override, two-sided, under another.
+const GLTF_SHAPES: &str = r#"
+[[shapes]]
+type = "gltf"
+file = "meshes/model.glb"
+transform = { scale = [0.5, 0.7, 0.6], rotate = [0.2, 1.0, -0.3, 35.0], translate = [0.5, 0.2, -0.5] }
+
+[[shapes]]
+type = "gltf"
+file = "meshes/model.glb"
+material = "white"
+two_sided = true
+transform = { translate = [-2.0, 0.0, 1.0] }
+"#;
+
+/// A glTF model (written by `common::gltf_writer`, from the specification) with what the
+/// loader composes: a root of translation, rotation and non-uniform scale over three
+/// children (a column-major matrix, a mirroring scale, a plain TRS); indexed and
+/// non-indexed primitives, a zero-area triangle to skip, a glossy dielectric that is
+/// double-sided, a rough metal with a quote in its name, and no material at all.
+fn gltf_model() -> Vec<u8> {
+    use serde_json::json;
+    let mut w = common::gltf_writer::GltfWriter::default();
+    let plastic = w.material(json!({
+        "name": "plastic",
+        "doubleSided": true,
+        "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.3, 0.2, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.45},
+    }));
+    let metal = w.material(json!({
+        "name": "rough \"gold\"",
+        "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.7, 0.3, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.6},
+    }));
+    let quad = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.2], [0.0, 1.0, 0.2]];
+    let a = w.mesh(&quad, Some(&[0, 1, 2, 0, 2, 3]), Some(plastic));
+    let b = w.mesh(
+        &[[0.0, 0.0, 0.0], [1.0, 0.2, 0.0], [0.3, 1.0, 0.1], [0.0, 0.0, 0.0], [1.0, 0.2, 0.0], [0.0, 0.0, 0.0]],
+        None,
+        Some(metal),
+    );
+    let c =
+        w.mesh(&[[0.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0], [0.5, 1.5, 0.5]], Some(&[0, 2, 1, 1, 2, 3]), None);
+    let matrix = w.node(
+        json!({"mesh": a, "matrix": [0.9, 0.1, 0.0, 0.0, -0.1, 0.9, 0.2, 0.0, 0.0, -0.2, 1.1, 0.0, 0.3, -0.2, 0.4, 1.0]}),
+        false,
+    );
+    let mirrored = w.node(json!({"mesh": b, "scale": [-1.0, 1.0, 1.0], "translation": [0.0, 1.0, 0.0]}), false);
+    let plain = w.node(
+        json!({"mesh": c, "rotation": [0.0, 0.38268343, 0.0, 0.92387953], "translation": [1.0, 0.0, 0.0]}),
+        false,
+    );
+    w.node(
+        json!({
+            "children": [matrix, mirrored, plain],
+            "translation": [0.2, 0.1, -0.3],
+            "rotation": [0.18257419, 0.36514837, 0.54772256, 0.73029674],
+            "scale": [1.2, 0.8, 1.5],
+        }),
+        true,
+    );
+    w.glb()
+}
+
+/// The glTF's sample model, which `.ci/run` installs (Debian's assimp-testmodels).
+const ENGINE_MODEL: &str = "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
 
 /// Coordinates of the converted triangles against the loader's: both compute in f64 from
 /// the same numbers, the rotation by different formulas (Rodrigues, a quaternion).
 const GEOMETRY_TOLERANCE: f64 = 1e-9;
+/// The same for glTF models: the loader's node matrices are composed in f32 (the gltf crate),
+/// the converter's (`tools/mitsuba/gltf_reader.py`) in f64.
+const GLTF_GEOMETRY_TOLERANCE: f64 = 1e-6;
 
 #[test]
 fn test03_converter_geometry_is_the_loaders_triangle_for_triangle() {
@@ -226,16 +296,48 @@ fn test03_converter_geometry_is_the_loaders_triangle_for_triangle() {
     for name in ["cornell_box", "cornell_point", "sierpinski"] {
         scenes.push(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").join(format!("{name}.toml")));
     }
+    if Path::new(ENGINE_MODEL).is_file() {
+        scenes.push(common::scenes::shipped("engine_room"));
+    } else {
+        assert!(
+            std::env::var("FIRSTSHOT_REQUIRE_SAMPLES").is_err(),
+            "FIRSTSHOT_REQUIRE_SAMPLES is set but {ENGINE_MODEL} is missing (apt-get install assimp-testmodels)"
+        );
+        eprintln!("engine_room left out: {ENGINE_MODEL} is missing (apt-get install assimp-testmodels)");
+    }
     for path in scenes {
         let ours = scene::load(&path).unwrap();
         let theirs = run_json(&python, "convert.py", &[path.to_str().unwrap(), "--geometry"]);
         let surfaces = theirs["surfaces"].as_array().unwrap();
+        // glTF materials, mapped by the documented rule on both sides: the same kind and
+        // factors (the lobe's ks through each side's own quadrature of its albedo).
+        for m in ours.materials.iter().filter(|m| m.name.contains("(gltf")) {
+            let t = &theirs["materials"][&m.name];
+            let close = |a: f32, b: &Value, what: &str| {
+                let b = b.as_f64().unwrap();
+                assert!((f64::from(a) - b).abs() <= 1e-3 * b.abs().max(1e-3), "{}: {what} {a} against {b}", m.name);
+            };
+            match m.kind {
+                MaterialKind::Diffuse { albedo } => {
+                    assert_eq!(t["type"], "diffuse", "{}: {t}", m.name);
+                    (0..3).for_each(|c| close(albedo[c], &t["albedo"][c], "albedo"));
+                }
+                MaterialKind::Phong { diffuse, specular, shininess } => {
+                    assert_eq!(t["type"], "phong", "{}: {t}", m.name);
+                    (0..3).for_each(|c| close(diffuse[c], &t["diffuse"][c], "diffuse"));
+                    (0..3).for_each(|c| close(specular[c], &t["specular"][c], "specular"));
+                    close(shininess, &t["shininess"], "shininess");
+                }
+            }
+        }
         assert_eq!(surfaces.len(), ours.surfaces.len(), "{}: surfaces", path.display());
         for (s, t) in ours.surfaces.iter().zip(surfaces) {
             let tris = t["triangles"].as_array().unwrap();
             assert_eq!(tris.len(), s.triangles.len(), "{}: triangles of {}", path.display(), s.origin);
             assert_eq!(t["two_sided"].as_bool().unwrap(), s.two_sided, "{}", s.origin);
             assert_eq!(rgb(&t["emission"]), s.emission, "{}", s.origin);
+            // The gltf crate composes a node's translation, rotation and scale in f32.
+            let tolerance = if s.origin.contains("(gltf") { GLTF_GEOMETRY_TOLERANCE } else { GEOMETRY_TOLERANCE };
             for (k, (a, b)) in s.triangles.iter().zip(tris).enumerate() {
                 let material = &ours.materials[a.material as usize].name;
                 assert_eq!(t["materials"][k].as_str().unwrap(), material, "{} triangle {k}", s.origin);
@@ -243,7 +345,7 @@ fn test03_converter_geometry_is_the_loaders_triangle_for_triangle() {
                     let p = vec3(&b[v]);
                     let scale = a.vertices[v].abs().max_element().max(1.0);
                     assert!(
-                        (p - a.vertices[v]).abs().max_element() <= GEOMETRY_TOLERANCE * scale,
+                        (p - a.vertices[v]).abs().max_element() <= tolerance * scale,
                         "{}: {} triangle {k} vertex {v}: converter {p}, loader {}",
                         path.display(),
                         s.origin,

@@ -6,7 +6,9 @@ loader (src/scene/shapes.rs, src/scene/load.rs) produces them, so that
 conversion:
 
 - every shape becomes one triangle mesh (a PLY file) with flat face normals; a quad is the
-  triangles (v0, v1, v2), (v0, v2, v3), a polygon of an OBJ file the fan (v0, vi, vi+1);
+  triangles (v0, v1, v2), (v0, v2, v3), a polygon of an OBJ file the fan (v0, vi, vi+1); a
+  glTF file (a `gltf` shape) is read by ``gltf_reader.py``, written apart from the loader,
+  its materials mapped to max-Phong by the documented rule;
 - surfaces are one-sided: Mitsuba's ``diffuse`` and our ``maxphong`` are black seen from
   behind, as firstshot's patches are; ``two_sided = true`` wraps the BSDF in ``twosided``;
 - an area light is a one-sided ``area`` emitter of its radiance on a surface that reflects
@@ -190,6 +192,25 @@ def load(path):
                 face = fan([positions[k] for k in indices])
                 tris += face
                 mats += [usemtl or material] * len(face)
+        elif kind == "gltf":
+            import gltf_reader
+
+            written = s["file"]
+            origin = f'shapes[{i}] (gltf "{written}")'
+            o = transform.apply([0.0, 0.0, 0.0])
+            axes = [sub(transform.apply(e), o) for e in ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0])]
+            placement = [[axes[0][r], axes[1][r], axes[2][r], o[r]] for r in range(3)] + [[0.0, 0.0, 0.0, 1.0]]
+            parts, found = gltf_reader.read(os.path.join(base_dir, written), placement, material, origin)
+            materials = {**materials, **found}
+            for part in parts:
+                if "emission" in s:
+                    part["emission"] = [float(x) for x in s["emission"]]
+                part["two_sided"] = part["two_sided"] or bool(s.get("two_sided", False))
+                for m in part["materials"]:
+                    if m not in materials:
+                        raise ConvertError(f"shapes[{i}]: unknown material {m!r}")
+            surfaces += parts
+            continue
         else:
             raise ConvertError(f"shapes[{i}]: unknown shape type {kind!r}")
         for m in mats:
@@ -408,7 +429,7 @@ def main(argv=None):
         print(f"error: {args.scene}: {e}", file=sys.stderr)
         return 2
     if args.geometry:
-        json.dump({"surfaces": scene["surfaces"]}, sys.stdout)
+        json.dump({"surfaces": scene["surfaces"], "materials": scene["materials"]}, sys.stdout)
         print()
         return 0
     for s in scene["surfaces"]:
