@@ -133,7 +133,8 @@ pub fn shadow_resolution(scene: &Scene, patches: &Patches, options: &RenderOptio
 /// segment from y to x against the patches of the 2 x 2 texels around x's direction
 /// (docs/ALGORITHM.md 6). An occluding patch that covers none of those four centres is
 /// missed, so light leaks through a band up to a texel wide inside the outline of every
-/// occluding patch, even between the patches of one smooth, finely tessellated occluder:
+/// occluding patch (between the patches of one smooth, finely tessellated occluder too,
+/// until `blocks` in wgsl/image_estimate.wgsl went on past their smooth edges):
 /// the share of an occluder's shadow that leaks is about (texel size) / (patch size). Every
 /// patch may occlude, so the typical patch is the median over all of them (by count): with
 /// patch j of area A_j at distance d_j from the light, a texel of a face of side R spans

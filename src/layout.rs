@@ -13,9 +13,9 @@ pub const PATCH_TWIN: u32 = 1;
 pub const PATCH_FIRST_SHOT_LIGHT: u32 = 2;
 /// `PATCH_SMOOTH_EDGE << k`: the edge opposite vertex k continues into another patch of the
 /// scene within `SMOOTH_EDGE_COS` of this one's plane (the same surface goes on there), so
-/// that a sun's shadow test across that edge still meets the surface; without the bit the
-/// edge is an outline or a crease (`scene_buffers::smooth_edges`). Set only in scenes with a
-/// directional light.
+/// that a shadow test across that edge still meets the surface (a sun's, and a point's past a
+/// patch its texels show); without the bit the edge is an outline or a crease
+/// (`scene_buffers::smooth_edges`).
 pub const PATCH_SMOOTH_EDGE: u32 = 4;
 /// The cosine between two patches' planes within which they are taken for one (possibly
 /// curved) surface: 30 degrees. The host's smooth edges use it, and WGSL's shadow test for

@@ -40,8 +40,8 @@ const DEVICE_BYTES_PER_PIXEL: u64 = 2 * 32 + 8 + 8 + 8;
 const HOST_BYTES_PER_PIXEL: u64 = 32 + 16;
 /// Host bytes per patch while the scene is uploaded, besides the tessellated patch: the
 /// patch table and the triangles built for the upload, and wgpu's staging copy of each, and
-/// the pieces' bits (`scene_buffers::piece_bits`, 4 bytes). (In a scene with a sun,
-/// `scene_buffers::smooth_edges` takes about 100 bytes a patch before them, and returns it.)
+/// the pieces' bits (`scene_buffers::piece_bits`, 4 bytes). (`scene_buffers::smooth_edges`
+/// takes about 100 bytes a patch before them, and returns it.)
 const UPLOAD_BYTES_PER_PATCH: u64 = 2 * (96 + 3 * RASTER_VERTEX_BYTES) + 4;
 /// A rasterised vertex: its `RasterVertex` and its lattice word.
 const RASTER_VERTEX_BYTES: u64 = (size_of::<RasterVertex>() + size_of::<u32>()) as u64;

@@ -347,25 +347,50 @@ fn test07_an_image_sum_in_bands_of_rows_is_the_same_bits() {
 fn test08_a_finely_tessellated_occluder_does_not_leak_light() {
     // A window texel names the patch seen through its centre, and V tests the segment from
     // the light against the patches of the 3 x 3 texels around x's direction: an occluding
-    // patch that covers none of those centres is missed, even inside one smooth occluder cut
-    // into patches barely larger than a texel (docs/ALGORITHM.md 6). The automatic shadow
-    // resolution (direct_light::auto_resolution) makes a typical patch 8 texels across. The
-    // umbra of a finely tessellated square must then be dark; at half the hemicube
-    // resolution light leaks through it, which shows that the test can fail (at the
-    // hemicube resolution, 128, the former 2 x 2 texels leaked in 24 of 105 umbra pixels and
-    // the 3 x 3 leak in 1; at the automatic resolution 1 and 0).
-    let text = "format = 1\n[settings]\npatch_size = 0.06\nhemicube_resolution = 128\n\
+    // patch that covers none of those centres is missed. Inside one smooth occluder cut
+    // into patches about a texel wide, a neighbour of the missed patch covers a centre, and
+    // the test goes on past its smooth edges (docs/ALGORITHM.md 6, "Visibility"). So the
+    // umbra of a finely tessellated square must be dark even at faces of 64 texels, half the
+    // hemicube resolution, and at the automatic resolution. The same square cut into
+    // triangles whose shared corners are moved apart by 1e-5 of their size (no longer one
+    // surface for the test, and no gap any ray could find) shows that the test can fail: it
+    // leaks at 64: in all 105 umbra pixels (before the continuation the smooth square leaked
+    // in 76 of them at 64, and in none at the automatic 1056).
+    let head = "format = 1\n[settings]\npatch_size = 0.06\nhemicube_resolution = 128\n\
         [materials.grey]\ntype = \"diffuse\"\nalbedo = [0.6, 0.6, 0.6]\n\
         [[shapes]]\ntype = \"quad\"\nvertices = [[-1.0, 0.0, -1.0], [-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0]]\nmaterial = \"grey\"\n\
-        [[shapes]]\ntype = \"quad\"\nvertices = [[-0.3, 0.8, -0.3], [-0.3, 0.8, 0.3], [0.3, 0.8, 0.3], [0.3, 0.8, -0.3]]\nmaterial = \"grey\"\ntwo_sided = true\n\
         [camera]\nposition = [0.05, 3.0, 0.02]\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 0.0, 1.0]\nfov_y = 40.0\nwidth = 40\nheight = 40\n\
         [[lights]]\ntype = \"point\"\nposition = [0.05, 1.8, -0.04]\npower = [10.0, 10.0, 10.0]\n";
-    let (_scratch, scene) = load("tessellated_occluder", text);
+    let smooth = format!(
+        "{head}[[shapes]]\ntype = \"quad\"\nvertices = [[-0.3, 0.8, -0.3], [-0.3, 0.8, 0.3], [0.3, 0.8, 0.3], [0.3, 0.8, -0.3]]\nmaterial = \"grey\"\ntwo_sided = true\n"
+    );
+    // The cracked square: 20 x 20 cells of two triangles each (smaller than patch_size, so
+    // that each is one patch), every triangle shrunk by 1e-5 toward its centre.
+    let mut cracked = head.to_string();
+    let corner = |i: usize, k: usize| [-0.3 + 0.03 * i as f64, 0.8, -0.3 + 0.03 * k as f64];
+    for i in 0..20 {
+        for k in 0..20 {
+            for tri in [
+                [corner(i, k), corner(i, k + 1), corner(i + 1, k + 1)],
+                [corner(i, k), corner(i + 1, k + 1), corner(i + 1, k)],
+            ] {
+                let c: [f64; 3] = std::array::from_fn(|a| tri.iter().map(|v| v[a]).sum::<f64>() / 3.0);
+                let v = tri.map(|v| {
+                    format!("{:?}", std::array::from_fn::<f64, 3, _>(|a| c[a] + (v[a] - c[a]) * (1.0 - 1e-5)))
+                });
+                cracked += &format!(
+                    "[[shapes]]\ntype = \"triangle\"\nvertices = [{}, {}, {}]\nmaterial = \"grey\"\ntwo_sided = true\n",
+                    v[0], v[1], v[2]
+                );
+            }
+        }
+    }
+    let (_scratch, scene) = load("tessellated_occluder", &smooth);
+    let (_scratch2, cracked) = load("cracked_occluder", &cracked);
     let Some(ctx) = common::gpu() else { return };
     let caster = Caster::new(&scene);
     let Light::Point { position, power } = scene.lights[0] else { unreachable!() };
     let light = [(position, None, power[0] as f64 / (4.0 * std::f64::consts::PI))];
-    let patches = scene::tessellate(&scene, scene.settings.patch_size).unwrap();
     // The floor pixels whose whole square (corners, edge midpoints, a 4 x 4 grid) the caster
     // finds in the occluder's shadow, and the lit level beside it.
     let (w, h) = (scene.camera.width, scene.camera.height);
@@ -390,26 +415,32 @@ fn test08_a_finely_tessellated_occluder_does_not_leak_light() {
         }
     }
     assert!(umbra.len() > 60, "the occluder must shade a patch of the floor ({} pixels)", umbra.len());
-    let leaked = |shadow_resolution: Option<u32>| {
-        let mut options = RenderOptions::from_scene(&scene);
+    let leaked = |scene: &Scene, shadow_resolution: Option<u32>| {
+        let patches = scene::tessellate(scene, scene.settings.patch_size).unwrap();
+        let mut options = RenderOptions::from_scene(scene);
         (options.iterations, options.direct_passes, options.shadow_resolution) = (0, 16, shadow_resolution);
-        let rendered = render(&ctx, &scene, &patches, &options).unwrap();
+        let rendered = render(&ctx, scene, &patches, &options).unwrap();
         let leaks = umbra.iter().filter(|&&(px, py)| rendered.image.at(px, py)[0] as f64 > 1e-3 * lit).count();
         (leaks, rendered.stats.shadow_resolution)
     };
-    let (before, r_before) = leaked(scene.settings.hemicube_resolution.map(|r| r / 2));
-    let (after, r_after) = leaked(None);
+    let coarse = scene.settings.hemicube_resolution.map(|r| r / 2);
+    let (smooth_coarse, r_coarse) = leaked(&scene, coarse);
+    let (smooth_auto, r_auto) = leaked(&scene, None);
+    let (cracked_coarse, _) = leaked(&cracked, coarse);
     eprintln!(
-        "{} umbra pixels; lit by leaks: {before} at shadow resolution {r_before}, {after} at {r_after} (automatic)",
+        "{} umbra pixels lit by leaks: {smooth_coarse} at faces of {r_coarse}, {smooth_auto} at {r_auto} (automatic); \
+         the cracked square {cracked_coarse} at {r_coarse}",
         umbra.len()
     );
-    assert!(r_after > r_before, "the automatic resolution must exceed the hemicube's here: {r_after}");
+    assert!(r_auto > r_coarse, "the automatic resolution must exceed half the hemicube's here: {r_auto}");
     assert!(
-        before * 10 > umbra.len(),
-        "at half the hemicube resolution the leak should show: {before} of {}",
+        cracked_coarse * 10 > umbra.len(),
+        "the cracked square should leak at faces of {r_coarse}: {cracked_coarse} of {}",
         umbra.len()
     );
-    assert!(after * 50 <= umbra.len(), "the automatic resolution leaks in {after} of {} umbra pixels", umbra.len());
+    for (leaks, side) in [(smooth_coarse, r_coarse), (smooth_auto, r_auto)] {
+        assert!(leaks * 50 <= umbra.len(), "faces of {side} leak in {leaks} of {} umbra pixels", umbra.len());
+    }
 }
 
 #[test]

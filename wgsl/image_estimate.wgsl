@@ -95,8 +95,8 @@ fn has_other_windows() -> bool {
 // the light and on x's own surface.
 const SEGMENT_EPSILON: f32 = 1e-4;
 
-// How far past a patch's smooth edge, in texels of the sun's view, its surface is taken to go
-// on (`crosses_surface`).
+// How far past a patch's smooth edge, in texels of the window, its surface is taken to go on
+// (`crosses_surface`).
 const CONTINUATION_TEXELS: f32 = 1.5;
 
 // Whether the segment y + t (x - y), SEGMENT_EPSILON < t < 1 - SEGMENT_EPSILON, crosses
@@ -134,9 +134,11 @@ fn atlas_id(atlas: u32, at: vec2<i32>) -> u32 {
 }
 
 // Whether the surface `id` (patch index + 1) of a window texel lies on the segment from y to x,
-// x on patch j. With `by_plane` (a directional light's parallel view), whether the segment
-// crosses that surface's plane: see `visible`.
-fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f32) -> bool {
+// x on patch j. With `by_plane` (a directional light's parallel view, `texel` its texel's
+// side), whether the segment crosses that surface's plane: see `visible`. Else (a point's
+// window, `texel_at_x` a texel's footprint at x's depth) whether it crosses the patch, or
+// its surface a little past one of its smooth edges (`crosses_surface`).
+fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f32, texel_at_x: f32) -> bool {
     if (id == NO_PATCH || id - 1u == j || id > params.patch_count) {
         return false;
     }
@@ -161,13 +163,33 @@ fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f3
     if (by_plane) {
         return crosses_surface(id - 1u, y, x, texel);
     }
-    return segment_hits(id - 1u, y, x);
+    if (segment_hits(id - 1u, y, x)) {
+        return true;
+    }
+    // A surface cut into patches not much larger than a texel (a finely tessellated model):
+    // the patch the segment crosses may cover none of the texel centres, while a neighbour
+    // of its surface does. Past that neighbour's smooth edges the surface goes on, so it
+    // blocks there too, within the reach of `crosses_surface` (the footprint of a texel
+    // where the segment crosses, t of the way from y). Without this, light leaked through
+    // such surfaces in proportion to texel / patch size: the engine_room model's shadows
+    // let 2.5 % of the area light's light too many through at the 2048 cap
+    // (docs/ALGORITHM.md 6, "Visibility"). Not within the largest reach of x (4 x
+    // CONTINUATION_TEXELS texels): there the segment leaves x's own curved surface at a
+    // grazing angle and the planes of x's neighbours, continued, would shade it.
+    if (patches_at(id - 1u).flags >= PATCH_SMOOTH_EDGE) {
+        let t = side_y / (side_y - side_x);
+        if (t > SEGMENT_EPSILON && (1.0 - t) * length(x - y) > 4.0 * CONTINUATION_TEXELS * texel_at_x) {
+            return crosses_surface(id - 1u, y, x, texel_at_x * t);
+        }
+    }
+    return false;
 }
 
-// For a sun (`visible`), given that the segment from y to x crosses the plane of patch k:
-// whether it crosses k's surface there. Inside the triangle it does. Beyond an edge that
+// For a sun (`visible`), and past the smooth edges of a point's texels (`blocks`), given that
+// the segment from y to x crosses the plane of patch k: whether it crosses k's surface there,
+// `texel` the window's texel side where it does. Inside the triangle it does. Beyond an edge that
 // continues into a neighbour of about the same plane (PATCH_SMOOTH_EDGE, set by the host)
-// the surface goes on, and a neighbour the sun's texels did not show may hold the crossing:
+// the surface goes on, and a neighbour the window's texels did not show may hold the crossing:
 // it is taken to (a tessellated roof or wall, whose mesh vertices poke between the texel
 // centres, does not leak). Beyond an outline or a crease it does not: the segment passes
 // beside the surface there. Until 2026-11-26 every crossing of the plane blocked, and the
@@ -290,10 +312,12 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
         // Sierpinski scene's direct light was 0.81 % off Mitsuba's, 93 % of it too bright;
         // 0.59 % with 3 x 3, 0.55 % with 4 x 4, for about 8 % more time per direct pass.
         let centre = vec2<i32>(floor(pixel));
+        // A texel's side at x's depth (the face spans 2 right.w per unit of depth).
+        let texel_at_x = 2.0 * right.w / f32(side) * z;
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
                 let at = clamp(centre + vec2<i32>(dx, dy), vec2<i32>(0), last);
-                if (blocks(atlas_id(tile.w, origin + at), j, y, x, false, 0.0)) {
+                if (blocks(atlas_id(tile.w, origin + at), j, y, x, false, 0.0, texel_at_x)) {
                     return false;
                 }
             }
@@ -311,16 +335,16 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     let d = atlas_id(tile.w, origin + hi);
     // A texel's side in the scene (the view is orthographic, 2 right.w across).
     let texel = 2.0 * right.w / f32(side);
-    if (blocks(a, j, y, x, true, texel)) {
+    if (blocks(a, j, y, x, true, texel, 0.0)) {
         return false;
     }
-    if (b != a && blocks(b, j, y, x, true, texel)) {
+    if (b != a && blocks(b, j, y, x, true, texel, 0.0)) {
         return false;
     }
-    if (c != a && c != b && blocks(c, j, y, x, true, texel)) {
+    if (c != a && c != b && blocks(c, j, y, x, true, texel, 0.0)) {
         return false;
     }
-    return d == a || d == b || d == c || !blocks(d, j, y, x, true, texel);
+    return d == a || d == b || d == c || !blocks(d, j, y, x, true, texel, 0.0);
 }
 
 // Multiple importance sampling of an emitting shape's light (docs/ALGORITHM.md 6): the

@@ -243,8 +243,7 @@ fn v4(v: DVec3, w: f64) -> [f32; 4] {
 /// or plain emitters.
 pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<GpuPatch> {
     let black = scene.materials.len() as u32;
-    let has_sun = scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Directional { .. }));
-    let smooth = if has_sun { smooth_edges(patches) } else { Vec::new() };
+    let smooth = smooth_edges(patches);
     let pieces = piece_bits(patches);
     patches
         .patches
