@@ -377,17 +377,8 @@ fn test05_a_gltf_shape_in_a_toml_room_with_transform_and_material_override() {
 /// installs it; scenes/LICENSES.md). It is placed in a lit TOML room and rendered.
 #[test]
 fn test06_a_real_world_gltf_loads_and_renders() {
-    let engine = Path::new("/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb");
-    if !engine.is_file() {
-        assert!(
-            std::env::var("FIRSTSHOT_REQUIRE_SAMPLES").is_err(),
-            "FIRSTSHOT_REQUIRE_SAMPLES is set but {} is missing (apt-get install assimp-testmodels)",
-            engine.display()
-        );
-        eprintln!("SKIPPED: {} is missing (apt-get install assimp-testmodels)", engine.display());
-        return;
-    }
-    let scene = scene::load(&common::scenes::shipped("engine_room")).unwrap();
+    let Some(engine_room) = common::scenes::engine_room() else { return };
+    let scene = scene::load(&engine_room).unwrap();
     let triangles: usize = scene.surfaces.iter().map(|s| s.triangles.len()).sum();
     assert!(triangles > 50_000, "{triangles} triangles");
     let Some(ctx) = common::gpu() else { return };

@@ -783,9 +783,7 @@ fn test18_threads_open_and_close_devices_at_once() {
     if common::gpu().is_none() {
         return;
     }
-    let choice: firstshot::gpu::AdapterChoice = std::env::var("FIRSTSHOT_TEST_ADAPTER")
-        .map(|s| s.parse().unwrap())
-        .unwrap_or(firstshot::gpu::AdapterChoice::Auto);
+    let choice = common::test_adapter();
     let (done, finished) = mpsc::channel();
     let start = std::sync::Arc::new(std::sync::Barrier::new(8));
     for thread in 0..8u32 {

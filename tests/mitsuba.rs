@@ -278,9 +278,6 @@ fn gltf_model() -> Vec<u8> {
     w.glb()
 }
 
-/// The glTF's sample model, which `.ci/run` installs (Debian's assimp-testmodels).
-const ENGINE_MODEL: &str = "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
-
 /// Coordinates of the converted triangles against the loader's: both compute in f64 from
 /// the same numbers, the rotation by different formulas (Rodrigues, a quaternion).
 const GEOMETRY_TOLERANCE: f64 = 1e-9;
@@ -296,15 +293,7 @@ fn test03_converter_geometry_is_the_loaders_triangle_for_triangle() {
     for name in ["cornell_box", "cornell_point", "sierpinski"] {
         scenes.push(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").join(format!("{name}.toml")));
     }
-    if Path::new(ENGINE_MODEL).is_file() {
-        scenes.push(common::scenes::shipped("engine_room"));
-    } else {
-        assert!(
-            std::env::var("FIRSTSHOT_REQUIRE_SAMPLES").is_err(),
-            "FIRSTSHOT_REQUIRE_SAMPLES is set but {ENGINE_MODEL} is missing (apt-get install assimp-testmodels)"
-        );
-        eprintln!("engine_room left out: {ENGINE_MODEL} is missing (apt-get install assimp-testmodels)");
-    }
+    scenes.extend(common::scenes::engine_room());
     for path in scenes {
         let ours = scene::load(&path).unwrap();
         let theirs = run_json(&python, "convert.py", &[path.to_str().unwrap(), "--geometry"]);

@@ -32,12 +32,16 @@ pub fn max_phong(kd: f64, ks: f64, shininess: f64, n: DVec3, w_in: DVec3, w_out:
     kd / std::f64::consts::PI + ks * mirror.dot(w_out).max(0.0).powf(shininess) / cos_in.max(cos_out)
 }
 
+/// The adapter GPU tests open: `FIRSTSHOT_TEST_ADAPTER` (as `--adapter` takes it), else auto.
+pub fn test_adapter() -> AdapterChoice {
+    std::env::var("FIRSTSHOT_TEST_ADAPTER").map(|s| s.parse().unwrap()).unwrap_or(AdapterChoice::Auto)
+}
+
 /// The one way tests get a GPU. With `FIRSTSHOT_REQUIRE_GPU=1` (CI) a missing adapter is a
 /// failure; with `FIRSTSHOT_REQUIRE_BACKEND=vulkan` so is an adapter of another backend.
 /// Elsewhere a missing adapter is a visible skip.
 pub fn gpu() -> Option<Context> {
-    let choice = std::env::var("FIRSTSHOT_TEST_ADAPTER").map(|s| s.parse().unwrap()).unwrap_or(AdapterChoice::Auto);
-    match Context::new(&choice) {
+    match Context::new(&test_adapter()) {
         Ok(ctx) => {
             if let Ok(backend) = std::env::var("FIRSTSHOT_REQUIRE_BACKEND") {
                 assert!(

@@ -96,6 +96,24 @@ pub fn shipped(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes").join(format!("{name}.toml"))
 }
 
+/// The glTF model scenes/engine_room.toml places: the Khronos sample "2CylinderEngine" as
+/// Debian's assimp-testmodels installs it (`.ci/run` does).
+pub const ENGINE_MODEL: &str = "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
+
+/// The shipped engine_room scene when its model is installed. Without it: a failure under
+/// `FIRSTSHOT_REQUIRE_SAMPLES` (CI), else `None` and a line that says what is left out.
+pub fn engine_room() -> Option<PathBuf> {
+    if std::path::Path::new(ENGINE_MODEL).is_file() {
+        return Some(shipped("engine_room"));
+    }
+    assert!(
+        std::env::var("FIRSTSHOT_REQUIRE_SAMPLES").is_err(),
+        "FIRSTSHOT_REQUIRE_SAMPLES is set but {ENGINE_MODEL} is missing (apt-get install assimp-testmodels)"
+    );
+    eprintln!("SKIPPED: {ENGINE_MODEL} is missing (apt-get install assimp-testmodels)");
+    None
+}
+
 /// Writes `text` as `scene.toml` in a scratch folder of its own (`group`/`test`) and loads
 /// it; the folder lives as long as the returned `Scratch` (meshes beside it may be written
 /// there too).
