@@ -895,3 +895,50 @@ fn test16_a_closed_room_does_not_see_the_sky_outside_it() {
     eprintln!("closed room: image mean {mean:.5}, what the sky adds {leak:.5}");
     assert!(leak < 0.006 * mean, "the sky leaks {leak:.5} into a room of mean {mean:.5}");
 }
+
+#[test]
+fn test17_kernels_built_without_the_glossy_code_render_a_diffuse_scene_as_with_it() {
+    // A scene without glossy materials gets kernels with the glossy code compiled out
+    // (`SceneBuffers::constants`, GLOSSY in wgsl/common/brdf.wgsl). The same scene with one
+    // material given a glossy lobe of 1e-30 keeps the code in and adds nothing the image
+    // can hold: the two must render the same image (to float rounding), or the kernels
+    // without the glossy code lost something a diffuse surface needs. The Cornell box (an
+    // area light: windows at light points) and cornell_point (a point light: near senders'
+    // first bounce per point, its glossy materials made diffuse).
+    let Some(ctx) = common::gpu() else { return };
+    for name in ["cornell_box", "cornell_point"] {
+        // cornell_point's glossy block and floor made diffuse.
+        let mut diffuse = scene::load(&common::scenes::shipped(name)).unwrap();
+        for m in &mut diffuse.materials {
+            if let scene::MaterialKind::Phong { diffuse: albedo, .. } = m.kind {
+                m.kind = scene::MaterialKind::Diffuse { albedo };
+            }
+        }
+        let mut lobed = diffuse.clone();
+        let white = lobed.materials.iter_mut().find(|m| m.name == "white").expect("a white material");
+        let scene::MaterialKind::Diffuse { albedo } = white.kind else { panic!("{name}: white is diffuse") };
+        white.kind = scene::MaterialKind::Phong { diffuse: albedo, specular: [1e-30; 3], shininess: 4.0 };
+        let mut options = RenderOptions::from_scene(&diffuse);
+        (options.width, options.height) = (48, 48);
+        (options.patch_size, options.hemicube_resolution, options.shadow_resolution) = (80.0, Some(64), Some(64));
+        (options.bundle_resolution, options.iterations, options.burn_in) = (Some(64), 12, Some(2));
+        let patches = scene::tessellate(&diffuse, options.patch_size).unwrap();
+        let glossy_constant = |s: &Scene| {
+            let buffers = firstshot::gpu::scene_buffers::SceneBuffers::new(&ctx.device, s, &patches, true);
+            buffers.constants(true).iter().find(|(key, _)| *key == "GLOSSY").map(|(_, v)| *v)
+        };
+        assert_eq!(glossy_constant(&diffuse), Some(0.0), "{name}: built without the glossy code");
+        assert_eq!(glossy_constant(&lobed), Some(1.0), "{name}: built with the glossy code");
+        let plain = render(&ctx, &diffuse, &patches, &options).unwrap().image;
+        let with_lobe = render(&ctx, &lobed, &patches, &options).unwrap().image;
+        let mut worst = 0f32;
+        for (a, b) in plain.pixels.iter().zip(&with_lobe.pixels) {
+            for c in 0..3 {
+                worst = worst.max((a[c] - b[c]).abs() / b[c].abs().max(1e-3));
+            }
+        }
+        eprintln!("{name}: largest relative difference {worst:e}");
+        assert!(plain.mean()[0] > 0.01, "{name}: the image is lit");
+        assert!(worst < 1e-5, "{name}: the two builds differ by {worst:e}");
+    }
+}

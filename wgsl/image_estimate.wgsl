@@ -77,6 +77,11 @@ override SEEN_IN_GATHER: bool = false;
 // emitting shape (`render::first_bounce_per_point`).
 override FIRST_BOUNCE_PER_POINT: bool = false;
 
+// False where no patch is a first-shot emitting shape whose light D and G share
+// (`SceneBuffers::shared_emitters`): the sharing's code is then left out of every pixel's
+// gather and direct light (params.mis still says whether this run shares).
+override MIS: bool = true;
+
 fn has_light(kind: u32) -> bool {
     return (LIGHT_KINDS & (1u << kind)) != 0u;
 }
@@ -361,7 +366,7 @@ fn light_share(r2: f32, cos_l: f32, pick_area: f32) -> f32 {
 // unless m belongs to a first-shot emitting shape (whose emission the iteration leaves out)
 // and the image gathers.
 fn emitted_share(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
-    if (params.mis == 0u) {
+    if (!MIS || params.mis == 0u) {
         return vec3<f32>(0.0);
     }
     let pick_area = patches_at(m).light_pick_area;
@@ -408,7 +413,7 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
         if (has_light(LIGHT_AREA) && kind == LIGHT_AREA) {
             let cos_l = max(0.0, dot(lights[i].normal.xyz, -w_in));
             g *= cos_l;
-            if (params.mis != 0u && lights[i].normal.w > 0.0) {
+            if (MIS && params.mis != 0u && lights[i].normal.w > 0.0) {
                 g *= light_share(r2, cos_l, lights[i].normal.w);
             }
         }
@@ -858,7 +863,7 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
     // it has almost none of the variance of the factor |n . d|.
     let mean = image_mean_radiance_at(at.j).rgb;
     var radiance = 2.0 * m.diffuse.rgb * (cos_d * incoming - (cos_d - 0.5) * mean);
-    if (m.kind == MATERIAL_PHONG) {
+    if (GLOSSY && m.kind == MATERIAL_PHONG) {
         // The glossy part likewise: 2 pi |n . d| f_glossy(-s d, w_out) has the mean
         // ks S(n . w_out) over x's hemisphere (the lobe's albedo, by reciprocity the same at
         // exitance), so 2 pi (L - c Lbar_j) |n . d| f_glossy + c Lbar_j ks S keeps the mean of
@@ -1034,7 +1039,7 @@ fn gather_weight(at: Seen, toward: vec3<f32>) -> vec3<f32> {
     let m = materials[patches_at(at.j).material];
     let cos_d = abs(dot(at.n, toward));
     var weight = 2.0 * m.diffuse.rgb * cos_d;
-    if (m.kind == MATERIAL_PHONG && dot(at.n, toward) > 0.0) {
+    if (GLOSSY && m.kind == MATERIAL_PHONG && dot(at.n, toward) > 0.0) {
         weight += 2.0 * PI * cos_d * brdf_glossy(m, at.n, toward, at.w_out);
     }
     return weight;

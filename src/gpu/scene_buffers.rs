@@ -192,6 +192,13 @@ pub struct SceneBuffers {
     /// Bounding sphere of all geometry and light samples.
     pub centre: DVec3,
     pub radius: f64,
+    /// Whether any material has a glossy lobe (`MATERIAL_PHONG`). Where none has, the kernels
+    /// that evaluate BRDFs are compiled without the glossy code (`constants`).
+    pub glossy: bool,
+    /// Whether any patch is a first-shot emitting shape whose light the image shares between
+    /// its direct light and its gather (`GpuPatch::light_pick_area` > 0); where none is, the
+    /// image estimate is compiled without that sharing (`constants`).
+    pub shared_emitters: bool,
 }
 
 /// The material table as the GPU sees it; the last entry is black (area-light patches).
@@ -507,6 +514,8 @@ impl SceneBuffers {
         let samples = gpu_samples(patches);
         let (centre, radius) = bounding_sphere(patches);
         let none = wgpu::BufferUsages::empty();
+        let glossy = materials.iter().any(|m| m.kind == MATERIAL_PHONG);
+        let shared_emitters = gpu.iter().any(|p| p.light_pick_area > 0.0);
         SceneBuffers {
             patch_count: gpu.len() as u32,
             page_bytes,
@@ -532,7 +541,22 @@ impl SceneBuffers {
             first_shot: FirstShotTable::empty(device, gpu.len() as u32, page_bytes),
             centre,
             radius,
+            glossy,
+            shared_emitters,
         }
+    }
+
+    /// The `override` constants every kernel that evaluates BRDFs or the image estimate is
+    /// built with for this scene: `GLOSSY` (wgsl/common/brdf.wgsl) and, for the image
+    /// estimate (`with_emitters`), `MIS` (wgsl/image_estimate.wgsl). A CPU adapter pays for
+    /// the code of a branch that no invocation takes (docs/PERFORMANCE.md, "Branches cost
+    /// both sides on the CPU adapter"), so the code of what the scene lacks is left out.
+    pub fn constants(&self, with_emitters: bool) -> Vec<(&'static str, f64)> {
+        let mut out = vec![("GLOSSY", self.glossy as u32 as f64)];
+        if with_emitters {
+            out.push(("MIS", self.shared_emitters as u32 as f64));
+        }
+        out
     }
 }
 

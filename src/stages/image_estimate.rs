@@ -168,9 +168,12 @@ impl ImageEstimate {
             None => {
                 let built = SPEC.build_paged(device, scene.paging());
                 // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
-                let lights = direct.specialization();
-                let per_point = [("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)];
-                let gather = [("SEEN_IN_GATHER", 1.0), per_point[0]];
+                // And without the code of what the scene lacks (glossy materials, shared
+                // emitting shapes: `SceneBuffers::constants`).
+                let with_scene = |constants: &[(&'static str, f64)]| [constants, &scene.constants(true)].concat();
+                let lights = with_scene(&direct.specialization());
+                let per_point = with_scene(&[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)]);
+                let gather = [&[("SEEN_IN_GATHER", 1.0)], per_point.as_slice()].concat();
                 // Built side by side: a CPU adapter compiles each pipeline on the thread that
                 // asks for it (about 190 ms for the four on lavapipe, one after another).
                 let pipelines = std::thread::scope(|threads| {

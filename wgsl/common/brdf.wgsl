@@ -3,6 +3,12 @@
 // rounding of the three cosines moves f: at grazing and near a narrow lobe's mirror direction).
 // Directions point away from the surface: w_in toward the light, w_out toward the viewer.
 
+// False where the scene has no glossy material (every `Material::kind` MATERIAL_DIFFUSE):
+// the host then compiles the glossy code out of the kernels (`SceneBuffers::glossy`). On a
+// CPU adapter a branch that no invocation takes still costs a good part of its code, for
+// every pixel and patch (docs/PERFORMANCE.md, "Branches cost both sides on the CPU adapter").
+override GLOSSY: bool = true;
+
 fn brdf(m: Material, n: vec3<f32>, w_in: vec3<f32>, w_out: vec3<f32>) -> vec3<f32> {
     let cos_in = dot(n, w_in);
     let cos_out = dot(n, w_out);
@@ -15,7 +21,7 @@ fn brdf(m: Material, n: vec3<f32>, w_in: vec3<f32>, w_out: vec3<f32>) -> vec3<f3
 // The glossy lobe of the BRDF alone (zero for a diffuse material), for w_in and w_out both
 // above the surface: f = diffuse / pi + brdf_glossy.
 fn brdf_glossy(m: Material, n: vec3<f32>, w_in: vec3<f32>, w_out: vec3<f32>) -> vec3<f32> {
-    if (m.kind != MATERIAL_PHONG) {
+    if (!GLOSSY || m.kind != MATERIAL_PHONG) {
         return vec3<f32>(0.0);
     }
     let cos_in = dot(n, w_in);
