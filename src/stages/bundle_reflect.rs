@@ -71,10 +71,10 @@ impl BundleReflect {
             Some(like) => (like.kernel.clone(), like.pipeline.clone()),
             None => {
                 let built = SPEC.build_paged(device, scene.paging());
-                // Not compiled without the glossy code (`SceneBuffers::constants`): on lavapipe
-                // that left a branch on the bundle's uniform alone at the kernel's top level,
-                // which the driver then specialised on the uniform's values, recompiling the
-                // kernel at every step (docs/PERFORMANCE.md, "Uniform inlining on lavapipe").
+                // Not compiled without the glossy code (`SceneBuffers::constants`): built so,
+                // lavapipe recompiled this kernel at nearly every step, apparently specialising
+                // it on values of the step's uniform (docs/PERFORMANCE.md, "Uniform inlining on
+                // lavapipe").
                 let constants = [("IMAGE_FIRST_BOUNCE", writes_first_bounce as u32 as f64)];
                 let pipeline = built.specialized_pipeline(device, "main", &constants);
                 (built, pipeline)
