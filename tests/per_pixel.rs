@@ -925,7 +925,7 @@ fn test17_kernels_built_without_the_glossy_code_render_a_diffuse_scene_as_with_i
         let patches = scene::tessellate(&diffuse, options.patch_size).unwrap();
         let glossy_constant = |s: &Scene| {
             let buffers = firstshot::gpu::scene_buffers::SceneBuffers::new(&ctx.device, s, &patches, true);
-            buffers.constants(true).iter().find(|(key, _)| *key == "GLOSSY").map(|(_, v)| *v)
+            buffers.constants().iter().find(|(key, _)| *key == "GLOSSY").map(|(_, v)| *v)
         };
         assert_eq!(glossy_constant(&diffuse), Some(0.0), "{name}: built without the glossy code");
         assert_eq!(glossy_constant(&lobed), Some(1.0), "{name}: built with the glossy code");

@@ -94,7 +94,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         // gains made a few patches hundreds of times too bright for some steps. The mean
         // spreads one step's spike over as many steps at a fraction of its weight.
         var glossy = vec3<f32>(0.0);
-        if (GLOSSY && m.kind == MATERIAL_PHONG) {
+        if (m.kind == MATERIAL_PHONG) {
             let incoming = state_at(j).incoming;
             glossy = glossy_reflection(m, n, incoming.rgb, -state_at(j).direction.xyz, w_out);
             // Unrolled, for GLOSSY_HISTORY entries: a CPU adapter runs a data-dependent loop

@@ -192,8 +192,8 @@ pub struct SceneBuffers {
     /// Bounding sphere of all geometry and light samples.
     pub centre: DVec3,
     pub radius: f64,
-    /// Whether any material has a glossy lobe (`MATERIAL_PHONG`). Where none has, the kernels
-    /// that evaluate BRDFs are compiled without the glossy code (`constants`).
+    /// Whether any material has a glossy lobe (`MATERIAL_PHONG`). Where none has, the image
+    /// estimate is compiled without the glossy code (`constants`).
     pub glossy: bool,
     /// Whether any patch is a first-shot emitting shape whose light the image shares between
     /// its direct light and its gather (`GpuPatch::light_pick_area` > 0); where none is, the
@@ -546,17 +546,12 @@ impl SceneBuffers {
         }
     }
 
-    /// The `override` constants every kernel that evaluates BRDFs or the image estimate is
-    /// built with for this scene: `GLOSSY` (wgsl/common/brdf.wgsl) and, for the image
-    /// estimate (`with_emitters`), `MIS` (wgsl/image_estimate.wgsl). A CPU adapter pays for
-    /// the code of a branch that no invocation takes (docs/PERFORMANCE.md, "Branches cost
-    /// both sides on the CPU adapter"), so the code of what the scene lacks is left out.
-    pub fn constants(&self, with_emitters: bool) -> Vec<(&'static str, f64)> {
-        let mut out = vec![("GLOSSY", self.glossy as u32 as f64)];
-        if with_emitters {
-            out.push(("MIS", self.shared_emitters as u32 as f64));
-        }
-        out
+    /// The `override` constants the image estimate's kernels are built with for this scene:
+    /// `GLOSSY` (wgsl/common/brdf.wgsl) and `MIS` (wgsl/image_estimate.wgsl). A CPU adapter
+    /// pays for the code of a branch that no invocation takes (docs/PERFORMANCE.md, "Branches
+    /// cost both sides on the CPU adapter"), so the code of what the scene lacks is left out.
+    pub fn constants(&self) -> [(&'static str, f64); 2] {
+        [("GLOSSY", self.glossy as u32 as f64), ("MIS", self.shared_emitters as u32 as f64)]
     }
 }
 

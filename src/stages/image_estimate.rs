@@ -170,7 +170,7 @@ impl ImageEstimate {
                 // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
                 // And without the code of what the scene lacks (glossy materials, shared
                 // emitting shapes: `SceneBuffers::constants`).
-                let with_scene = |constants: &[(&'static str, f64)]| [constants, &scene.constants(true)].concat();
+                let with_scene = |constants: &[(&'static str, f64)]| [constants, &scene.constants()].concat();
                 let lights = with_scene(&direct.specialization());
                 let per_point = with_scene(&[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)]);
                 let gather = [&[("SEEN_IN_GATHER", 1.0)], per_point.as_slice()].concat();

@@ -4,9 +4,10 @@
 // Directions point away from the surface: w_in toward the light, w_out toward the viewer.
 
 // False where the scene has no glossy material (every `Material::kind` MATERIAL_DIFFUSE):
-// the host then compiles the glossy code out of the kernels (`SceneBuffers::glossy`). On a
-// CPU adapter a branch that no invocation takes still costs a good part of its code, for
-// every pixel and patch (docs/PERFORMANCE.md, "Branches cost both sides on the CPU adapter").
+// the host then builds the image estimate's kernels without the glossy code
+// (`SceneBuffers::constants`; bundle_reflect keeps the default, see its host). On a CPU
+// adapter a branch that no invocation takes still costs a good part of its code, for every
+// pixel (docs/PERFORMANCE.md, "Branches cost both sides on the CPU adapter").
 override GLOSSY: bool = true;
 
 fn brdf(m: Material, n: vec3<f32>, w_in: vec3<f32>, w_out: vec3<f32>) -> vec3<f32> {

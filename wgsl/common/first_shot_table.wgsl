@@ -16,7 +16,7 @@ fn first_shot_radiance(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: v
     }
     // A diffuse BRDF is kd / pi for every pair of directions above the surface, and every
     // stored sample lies above it (only front faces received), so the row's sum suffices.
-    if (!GLOSSY || m.kind == MATERIAL_DIFFUSE) {
+    if (m.kind == MATERIAL_DIFFUSE) {
         return fs_irradiance_at(j).rgb * m.diffuse.rgb / PI;
     }
     var sum = vec3<f32>(0.0);
