@@ -510,10 +510,11 @@ fn read_resume(
     let burn_in = firstshot::render::burn_in_steps(scene, options, options.bundles_per_step_for(scene, patches));
     let pixels: Vec<u64> =
         options.views(scene).iter().map(|v| v.camera.width as u64 * v.camera.height as u64).collect();
+    let schedule = firstshot::render::DirectSchedule::of(scene, patches, options);
     checkpoint.check_numbers(
         path,
         burn_in,
-        &|n| firstshot::render::direct_light_estimates(n, options),
+        &|n| schedule.estimates(n),
         Some(&pixels),
     )?;
     Ok(Some(checkpoint))

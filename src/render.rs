@@ -12,7 +12,7 @@ use crate::iteration::{BundleScene, Iteration};
 use crate::layout::*;
 use crate::memory::initial_fragment_capacity;
 use crate::rng::StepRng;
-use crate::scene::{Camera, NamedCamera, Patches, Scene};
+use crate::scene::{Camera, Light, NamedCamera, Patches, Scene};
 use crate::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
 use crate::stages::image_estimate::ImageEstimate;
 use crate::{Error, Result};
@@ -25,13 +25,56 @@ use std::time::Instant;
 pub const DEFAULT_DIRECT_PASSES: u32 = 64;
 
 /// The iteration's image estimates the direct light on each of its first
-/// min(`direct_passes`, FRONT_DIRECT_PASSES) steps, then on one in `window_steps`. More in
-/// front buys a short run little: the gathered indirect light, estimated on every step, is
-/// then the larger error, and each direct estimate of an area light renders its window
-/// again (the costliest image stage: 32 ms on the Sierpinski scene on lavapipe). Measured
-/// (docs/PERFORMANCE.md, "Direct-light passes in front"): 16 in front instead of 64 raised
-/// the error by 0-4 % and took 14-18 % less time, 8 about as good as 16.
+/// min(`direct_passes`, FRONT_DIRECT_PASSES) steps, then on one in `window_steps`, where a
+/// light samples a new point on every pass (an area light, a first-shot emitting shape).
+/// More in front buys a short run little: the gathered indirect light, estimated on every
+/// step, is then the larger error, and each direct estimate of an area light renders its
+/// window again (the costliest image stage: 32 ms on the Sierpinski scene on lavapipe).
+/// Measured (docs/PERFORMANCE.md, "Direct-light passes in front"): 16 in front instead of 64
+/// raised the error by 0-4 % and took 14-18 % less time, 8 about as good as 16.
 pub const FRONT_DIRECT_PASSES: u32 = 16;
+
+/// The same where every light keeps its window for the whole run (point, spot and
+/// directional lights, or none): then a pass differs from the next only in its camera
+/// sample, so D's error is the aliasing of the edges that cross a pixel, which the passes
+/// on one step in `window_steps` go on averaging, while the gather's error, estimated
+/// every step, is far the larger. On cornell_point 2, 4, 8 and 16 passes in front gave the
+/// same image errors within 1 % at 20, 50 and 200 steps, and 4 instead of 16 took 5-18 %
+/// less time (docs/PERFORMANCE.md, "Direct-light passes in front").
+pub const FRONT_DIRECT_PASSES_KEPT_WINDOWS: u32 = 4;
+
+/// Which image steps estimate the direct light: the first `front`, then one in `every`
+/// (`DirectSchedule::of`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DirectSchedule {
+    pub front: u32,
+    pub every: u32,
+}
+
+impl DirectSchedule {
+    /// The schedule of a render of `scene` (as `patches` tessellate it) with `options`:
+    /// min(`direct_passes`, FRONT_DIRECT_PASSES) in front where a light samples new points
+    /// on each pass, min(`direct_passes`, FRONT_DIRECT_PASSES_KEPT_WINDOWS) where none does,
+    /// then one in `window_steps`.
+    pub fn of(scene: &Scene, patches: &Patches, options: &RenderOptions) -> DirectSchedule {
+        let sampled = options.first_shot
+            && (scene.lights.iter().any(|l| matches!(l, Light::Area { .. })) || !patches.emitters.is_empty());
+        let front = if sampled { FRONT_DIRECT_PASSES } else { FRONT_DIRECT_PASSES_KEPT_WINDOWS };
+        DirectSchedule { front: options.direct_passes.min(front), every: options.window_steps.max(1) }
+    }
+
+    /// Whether image step `i` (0 for the first step past the burn-in) estimates the direct
+    /// light (it converges in far fewer samples than the gathered indirect light, which
+    /// every step estimates).
+    pub fn due(&self, i: u32) -> bool {
+        due(i, self.front, self.every)
+    }
+
+    /// How many of the first `n` image steps estimate the direct light (`due`).
+    pub fn estimates(&self, n: u32) -> u32 {
+        estimates(n, self.front, self.every)
+    }
+}
 
 /// Image steps per direct-light estimate by default, after the first `direct_passes`: the
 /// windows and the direct light cost about as much as a bundle step on a CPU adapter, and a
@@ -342,25 +385,8 @@ pub fn burn_in_steps(scene: &Scene, options: &RenderOptions, bundles_per_step: u
     }
 }
 
-/// Whether image step `i` (0 for the first step past the burn-in) estimates the direct
-/// light: each of the first min(`direct_passes`, FRONT_DIRECT_PASSES), then one in
-/// `window_steps` (the direct light converges in far fewer samples than the gathered
-/// indirect light, which every step estimates).
-pub fn direct_light_due(i: u32, options: &RenderOptions) -> bool {
-    due(i, front_direct_passes(options), options.window_steps.max(1))
-}
-
-fn front_direct_passes(options: &RenderOptions) -> u32 {
-    options.direct_passes.min(FRONT_DIRECT_PASSES)
-}
-
 fn due(i: u32, first: u32, every: u32) -> bool {
     i < first || i.is_multiple_of(every)
-}
-
-/// How many of the first `n` image steps estimate the direct light (`direct_light_due`).
-pub fn direct_light_estimates(n: u32, options: &RenderOptions) -> u32 {
-    estimates(n, front_direct_passes(options), options.window_steps.max(1))
 }
 
 fn estimates(n: u32, first: u32, every: u32) -> u32 {
@@ -583,7 +609,7 @@ pub struct PathRendered {
 /// averages its own `walk.steps_per_frame` steps (step k of the run is still step k of the
 /// random streams, so a run resumed from a frame's state gives the same frames bit for bit).
 /// The image is restarted at each frame, whose direct-light passes count from its start as
-/// a run's do from the burn-in (`direct_light_due`). `options.iterations` and `time_limit`
+/// a run's do from the burn-in (`DirectSchedule::due`). `options.iterations` and `time_limit`
 /// are not read.
 pub fn render_path(
     ctx: &Context,
@@ -696,6 +722,8 @@ pub struct Renderer<'a> {
     /// The step whose estimate is the image's first: the burn-in, or a frame's first step
     /// (`render_path`), which counts its direct-light passes from there.
     image_start: u32,
+    /// Which image steps estimate the direct light.
+    direct_schedule: DirectSchedule,
     /// Whether this pass estimates the direct light (`image_stages`).
     direct_due: bool,
     /// Whether this pass renders the area lights' windows at new points.
@@ -816,6 +844,7 @@ impl<'a> Renderer<'a> {
             coarse,
             burn_in,
             image_start: burn_in,
+            direct_schedule: DirectSchedule::of(scene, patches, given),
             direct_due: true,
             windows_due: true,
             first_bounce_per_point: per_point,
@@ -870,7 +899,7 @@ impl<'a> Renderer<'a> {
 
     /// Writes the uniforms of step `k`: its bundle, then, once past the burn-in, its camera
     /// sample (a uniform point of every pixel) and, on the steps that estimate the direct
-    /// light (`direct_light_due`), new points on the area lights, all from the step's own
+    /// light (`DirectSchedule::due`), new points on the area lights, all from the step's own
     /// generator.
     pub fn write_step(&mut self, k: u32) {
         let queue = &self.ctx.queue;
@@ -889,14 +918,14 @@ impl<'a> Renderer<'a> {
             let u = [rng.uniform(), rng.uniform()];
             let jitter = crate::rng::stratified_pixel_sample(self.options.seed, i as u64, u);
             self.write_camera([jitter[0] as f32, jitter[1] as f32]);
-            self.direct_due = direct_light_due(i, &self.options);
+            self.direct_due = self.direct_schedule.due(i);
             // The area lights' windows of the step's pass: new points on a step that estimates
             // the direct light; on the others, the last such step's, which the near senders'
             // first bounce reads (rendered again where a resumed run or a redone batch has
             // others in place, so that the image does not depend on either).
             self.windows_due = false;
             if self.direct_due || self.first_bounce_per_point {
-                let pass = direct_light_estimates(i + 1, &self.options) as u64 - 1;
+                let pass = self.direct_schedule.estimates(i + 1) as u64 - 1;
                 self.windows_due = self.direct.prepare_pass(queue, pass);
             }
         }
@@ -1408,6 +1437,33 @@ const STEPS_PER_BATCH: u32 = 8;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn direct_schedule_keeps_16_front_passes_only_where_a_light_samples_new_points() {
+        // (scene, first shot, --direct-passes, --window-steps) -> its schedule.
+        let schedule = |name: &str, first_shot: bool, direct_passes: u32, window_steps: u32| {
+            let scene = crate::scene::load::load(std::path::Path::new(&format!("scenes/{name}.toml"))).unwrap();
+            let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
+            let options =
+                RenderOptions { first_shot, direct_passes, window_steps, ..RenderOptions::from_scene(&scene) };
+            DirectSchedule::of(&scene, &patches, &options)
+        };
+        let (passes, every) = (DEFAULT_DIRECT_PASSES, DEFAULT_WINDOW_STEPS);
+        // An area light, emitting shapes: every pass a new point on them.
+        assert_eq!(schedule("cornell_box", true, passes, every).front, FRONT_DIRECT_PASSES);
+        assert_eq!(schedule("cornell_emissive", true, passes, every).front, FRONT_DIRECT_PASSES);
+        // A point light; a spot and a sun: windows kept for the run.
+        assert_eq!(schedule("cornell_point", true, passes, every).front, FRONT_DIRECT_PASSES_KEPT_WINDOWS);
+        assert_eq!(schedule("sun_room", true, passes, every).front, FRONT_DIRECT_PASSES_KEPT_WINDOWS);
+        // Without first shot there is no direct light to sample.
+        assert_eq!(schedule("cornell_box", false, passes, every).front, FRONT_DIRECT_PASSES_KEPT_WINDOWS);
+        // `--direct-passes` below either caps it; `--window-steps` sets the rest.
+        assert_eq!(schedule("cornell_box", true, 2, 5), DirectSchedule { front: 2, every: 5 });
+        assert_eq!(schedule("cornell_point", true, 2, 5), DirectSchedule { front: 2, every: 5 });
+        let point = schedule("cornell_point", true, passes, every);
+        assert_eq!((0..20).filter(|&i| point.due(i)).count() as u32, point.estimates(20));
+        assert_eq!(point.estimates(20), 4 + 2);
+    }
 
     #[test]
     fn direct_light_estimates_count_the_steps_that_are_due() {

@@ -57,7 +57,7 @@ fn three_steps(ctx: &Context, profiled: bool) -> (Vec<u8>, Vec<[f32; 3]>, u64, u
             let times = renderer.profile_step(k, &timer, vec![]).unwrap();
             let names: Vec<&str> = times.iter().map(|t| t.name).collect();
             // The direct light on the first `direct_passes` steps and then every
-            // `window_steps` steps (`render::direct_light_due`), the gather every step.
+            // `window_steps` steps (`render::DirectSchedule`), the gather every step.
             // Each of the step's bundles runs the bundle stages and then the gather of its
             // pixels; the camera and the direct light come once, after the first bundle.
             let mut expected = BUNDLE_STAGES.to_vec();
