@@ -119,9 +119,10 @@ pub(crate) struct RenderArgs {
     /// (default: from the scene's albedo).
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     burn_in: Option<u32>,
-    /// After the first --direct-passes image steps, at most 16 (each of which estimates the
-    /// direct light), steps of the iteration per estimate of the direct light, each with new points
-    /// on the area lights and their windows (default 8; the indirect light every step).
+    /// After the first --direct-passes image steps, at most 16 with area lights or emitting
+    /// shapes and 4 without (each of which estimates the direct light), steps of the
+    /// iteration per estimate of the direct light, each with new points on the area lights and
+    /// their windows (default 8; the indirect light every step).
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     window_steps: Option<u32>,
     /// Bundles each step of the iteration draws: 1, 4, or "auto" (the default unless the
