@@ -122,7 +122,10 @@ pub struct GpuMaterial {
     pub specular: [f32; 4],
     /// `MATERIAL_*`.
     pub kind: u32,
-    pub _pad: [u32; 3],
+    /// The weight c of the glossy lobe's control variate in the image's gather
+    /// (`scene::brdf::glossy_control_weight`); 0 without a glossy lobe.
+    pub glossy_control: f32,
+    pub _pad: [u32; 2],
 }
 
 /// One light sample y_i of the first shot. WGSL: `LightSample`.
@@ -363,7 +366,7 @@ macro_rules! layout {
 pub fn shared_layouts() -> Vec<StructLayout> {
     vec![
         layout!(GpuPatch => "Patch" { v0, v1, v2, normal, emission, material, flags, light_pick_area, piece }),
-        layout!(GpuMaterial => "Material" { diffuse, specular, kind }),
+        layout!(GpuMaterial => "Material" { diffuse, specular, kind, glossy_control }),
         layout!(GpuLightSample => "LightSample" { position, normal, strength, kind, cone_scale, cone_offset }),
         layout!(GpuPatchState => "PatchState" { incoming, direction, diffuse, mean_radiance, diffuse_sum, earlier }),
         layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),

@@ -844,12 +844,6 @@ fn lobe_albedo(k: u32, mu: f32) -> f32 {
     return mix(glossy_albedo[at], glossy_albedo[at + 1u], t - f32(i));
 }
 
-// The weight c of the glossy lobe's control variate c Lbar_j (docs/ALGORITHM.md 6). Below 1:
-// where the lobe looks at light far from the mean Lbar_j (a dark or bright mirror
-// direction), the variate with c = 1 adds variance; c = 1/2 still removes three quarters of
-// it where L is Lbar_j and never adds more than the plain estimate has unless the mirror
-// direction sees less than a quarter of Lbar_j.
-const GLOSSY_CONTROL: f32 = 0.5;
 
 // G at x from what it receives from `toward` (= s d, density 1 / (2 pi) on x's hemisphere).
 fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
@@ -869,7 +863,9 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
         // exitance), so 2 pi (L - c Lbar_j) |n . d| f_glossy + c Lbar_j ks S keeps the mean of
         // 2 pi L |n . d| f_glossy while the lobe's shape, which a uniform direction samples
         // badly, leaves only (L - c Lbar_j) to vary.
-        let base = GLOSSY_CONTROL * mean;
+        // c = m.glossy_control: 1 for a broad lobe, 1/2 for a sharp one
+        // (scene::brdf::glossy_control_weight says why).
+        let base = m.glossy_control * mean;
         if (dot(at.n, toward) > 0.0) {
             radiance += 2.0 * PI * (incoming - base) * cos_d * brdf_glossy(m, at.n, toward, at.w_out);
         }

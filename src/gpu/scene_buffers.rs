@@ -211,13 +211,15 @@ pub fn gpu_materials(scene: &Scene) -> Vec<GpuMaterial> {
                 diffuse: [albedo[0], albedo[1], albedo[2], 0.0],
                 specular: [0.0; 4],
                 kind: MATERIAL_DIFFUSE,
-                _pad: [0; 3],
+                glossy_control: 0.0,
+                _pad: [0; 2],
             },
             MaterialKind::Phong { diffuse, specular, shininess } => GpuMaterial {
                 diffuse: [diffuse[0], diffuse[1], diffuse[2], 0.0],
                 specular: [specular[0], specular[1], specular[2], shininess],
                 kind: if specular == [0.0; 3] { MATERIAL_DIFFUSE } else { MATERIAL_PHONG },
-                _pad: [0; 3],
+                glossy_control: crate::scene::brdf::glossy_control_weight(f64::from(shininess)) as f32,
+                _pad: [0; 2],
             },
         })
         .collect();

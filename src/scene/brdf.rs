@@ -75,6 +75,28 @@ pub fn glossy_albedo_lookup(table: &[f32], mu: f64) -> f64 {
     f64::from(table[i]) * (1.0 - f) + f64::from(table[i + 1]) * f
 }
 
+/// The weight c of the glossy lobe's control variate c Lbar_j in the image's gather
+/// (docs/ALGORITHM.md 6): 1 for a broad lobe, 1/2 for a sharp one.
+///
+/// Why: where the lobe weights incoming radiance L_m on average, a step's variance scales
+/// with (L_m - c Lbar_j)^2, least at c = L_m / Lbar_j. A broad lobe averages L over much of
+/// the hemisphere, as Lbar_j does, so L_m is close to Lbar_j and c = 1 takes away nearly all
+/// the variance the lobe's shape adds; a sharp lobe sees the light of a few directions, often
+/// well below the mean (a dark mirror direction), where c = 1 would add variance and c = 1/2
+/// hedges (it adds some only below a quarter of the mean). The measure of breadth is the
+/// lobe's effective share of the hemisphere at normal view, E[g]^2 / E[g^2] for the
+/// weight g = cos^(n + 1) under uniform directions, (2n + 3) / (n + 2)^2, against the
+/// cosine lobe's 3 / 4: a lobe is broad at a third of that or more (n <= 5). Measured
+/// (docs/PERFORMANCE.md, "The glossy control variate's weight"): with c = 1 the Sierpinski
+/// scene (n = 3) had 0.61-0.70 of the squared error of c = 1/2 after 10-50 steps (0.99
+/// after 200), cornell_point (n = 20, 60) 1.02 and the glossy gallery (n = 10, 60)
+/// 1.14-1.17. Either value keeps the gather unbiased: only its variance depends on c.
+pub fn glossy_control_weight(shininess: f64) -> f64 {
+    let n = shininess.max(0.0);
+    let share = (2.0 * n + 3.0) / ((n + 2.0) * (n + 2.0));
+    if share >= 0.75 / 3.0 { 1.0 } else { 0.5 }
+}
+
 /// The largest directional albedo over all incident angles, per channel. A material whose
 /// value exceeds 1 in any channel gains energy and is refused by the loader.
 pub fn max_directional_albedo(kind: &MaterialKind) -> Rgb {
@@ -246,6 +268,32 @@ fn gauss_legendre(from: f64, to: f64, f: impl Fn(f64) -> f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn glossy_control_weight_is_one_for_broad_lobes_and_a_half_for_sharp_ones() {
+        // The share (2n + 3) / (n + 2)^2 falls through a third of the cosine lobe's 3/4
+        // between n = 5 (0.265) and n = 6 (0.234).
+        for n in [0.0, 1.0, 3.0, 5.0] {
+            assert_eq!(glossy_control_weight(n), 1.0, "n = {n}");
+        }
+        for n in [6.0, 10.0, 20.0, 60.0, 1e4] {
+            assert_eq!(glossy_control_weight(n), 0.5, "n = {n}");
+        }
+        // The share is what a quadrature of the weight gives.
+        for n in [0.0, 3.0, 20.0] {
+            let steps = 20000;
+            let (mut m1, mut m2) = (0.0, 0.0);
+            for i in 0..steps {
+                // Uniform over the hemisphere: cos theta uniform in [0, 1].
+                let mu = (i as f64 + 0.5) / steps as f64;
+                let g: f64 = mu.powf(n + 1.0);
+                m1 += g / steps as f64;
+                m2 += g * g / steps as f64;
+            }
+            let share = (2.0 * n + 3.0) / ((n + 2.0) * (n + 2.0));
+            assert!((m1 * m1 / m2 - share).abs() < 1e-6, "n = {n}: {} against {share}", m1 * m1 / m2);
+        }
+    }
     use rand_core::{RngCore, SeedableRng};
     use rand_pcg::Pcg64;
 

@@ -19,7 +19,7 @@ struct Material {
     diffuse: vec4<f32>,  // rgb kd
     specular: vec4<f32>, // rgb ks, w shininess
     kind: u32,           // MATERIAL_*
-    _pad0: u32,
+    glossy_control: f32, // c of the glossy control variate (scene::brdf::glossy_control_weight)
     _pad1: u32,
     _pad2: u32,
 }
