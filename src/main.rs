@@ -512,12 +512,7 @@ fn read_resume(
     let pixels: Vec<u64> =
         options.views(scene).iter().map(|v| v.camera.width as u64 * v.camera.height as u64).collect();
     let schedule = firstshot::render::DirectSchedule::of(scene, patches, options);
-    checkpoint.check_numbers(
-        path,
-        burn_in,
-        &|n| schedule.estimates(n),
-        Some(&pixels),
-    )?;
+    checkpoint.check_numbers(path, burn_in, &|n| schedule.estimates(n), Some(&pixels))?;
     Ok(Some(checkpoint))
 }
 

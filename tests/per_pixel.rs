@@ -505,6 +505,9 @@ fn test10_the_gathers_control_variate_removes_the_projected_area_noise() {
     }
 }
 
+/// A pixel (x, y) and its exact radiance.
+type ExactPixel = ((u32, u32), f64);
+
 /// A max-Phong plane (kd 0.2, ks 0.5, `shininess`) alone under a sky of radiance 1, seen by a
 /// 32 x 32 camera; with the pixels that see the plane and nothing else and their exact
 /// radiance: the directional albedo kd + ks S(n . w_out), S the lobe's albedo integrated by
@@ -513,7 +516,7 @@ fn test10_the_gathers_control_variate_removes_the_projected_area_noise() {
 /// (Testing the pixel's centre alone let in pixels near the far edge whose footprint, 2 units
 /// deep at that grazing angle, reaches past the plane to the brighter sky: they made the
 /// image's mean look 0.5-0.7 % too bright.)
-fn glossy_plane_under_the_sky(test: &str, shininess: f64) -> (Scratch, Scene, Vec<((u32, u32), f64)>) {
+fn glossy_plane_under_the_sky(test: &str, shininess: f64) -> (Scratch, Scene, Vec<ExactPixel>) {
     let text = format!(
         r#"format = 1
 [camera]
@@ -969,8 +972,7 @@ fn test18_a_broad_lobe_under_a_uniform_sky_keeps_little_of_its_shapes_noise() {
             let mut options = RenderOptions::from_scene(&scene);
             (options.iterations, options.burn_in, options.seed) = (8, Some(30), seed);
             let image = render(&ctx, &scene, &patches, &options).unwrap().image;
-            let squared =
-                exact.iter().map(|&((x, y), e)| (image.at(x, y)[0] as f64 / e - 1.0).powi(2)).sum::<f64>();
+            let squared = exact.iter().map(|&((x, y), e)| (image.at(x, y)[0] as f64 / e - 1.0).powi(2)).sum::<f64>();
             let rms = (squared / exact.len() as f64).sqrt();
             eprintln!("broad lobe under the sky, seed {seed}: RMS relative error {rms:.4} after 8 steps");
             rms

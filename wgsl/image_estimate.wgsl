@@ -844,7 +844,6 @@ fn lobe_albedo(k: u32, mu: f32) -> f32 {
     return mix(glossy_albedo[at], glossy_albedo[at + 1u], t - f32(i));
 }
 
-
 // G at x from what it receives from `toward` (= s d, density 1 / (2 pi) on x's hemisphere).
 fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
     let k = patches_at(at.j).material;
