@@ -169,7 +169,8 @@ pub(crate) struct RenderArgs {
     /// auto | cpu | gpu | a substring of the adapter's name.
     #[arg(long, value_name = "A", default_value = "auto")]
     adapter: AdapterChoice,
-    /// Print the adapters found (name, backend, type) and exit.
+    /// Print the adapters found (name, backend, type, driver; "unusable: ..." where firstshot
+    /// cannot run on one) and exit.
     #[arg(long)]
     list_adapters: bool,
     /// Write run statistics as JSON.
@@ -365,8 +366,13 @@ fn print_adapters() -> Result<(), Failure> {
     if adapters.is_empty() {
         out.push_str("no adapters found\n");
     }
-    for a in adapters {
-        out.push_str(&format!("{}\t{}\t{}\t{}\n", a.name, a.backend, a.device_type, a.driver));
+    for (a, unusable) in adapters {
+        out.push_str(&format!("{}\t{}\t{}\t{}", a.name, a.backend, a.device_type, a.driver));
+        // A fifth column only where firstshot cannot run on the adapter.
+        if let Some(why) = unusable {
+            out.push_str(&format!("\tunusable: {why}"));
+        }
+        out.push('\n');
     }
     cli::io::print_stdout(&out).map_err(stdout_failure)
 }

@@ -104,7 +104,7 @@ fn test02_optional_features_are_enabled_only_where_the_adapter_has_them() {
     let Some(plain) = gpu() else { return };
     assert!(plain.features().is_empty(), "the product path opens no optional feature");
     assert!(!StageTimer::new(&plain, 4).has_timestamps());
-    let index = list_adapters().iter().position(|a| *a == plain.summary).expect("the test adapter is listed");
+    let index = list_adapters().iter().position(|(a, _)| *a == plain.summary).expect("the test adapter is listed");
     let ctx = Context::new_with_features(&AdapterChoice::Index(index), TIMESTAMP_FEATURES).unwrap();
     assert_eq!(ctx.summary, plain.summary, "AdapterChoice::Index opens the adapter list_adapters shows there");
     assert_eq!(ctx.features(), TIMESTAMP_FEATURES & ctx.adapter.features());

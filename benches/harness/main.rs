@@ -55,7 +55,8 @@ struct Args {
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     scenes: Option<Vec<String>>,
     /// Adapters: all | first | cpu | gpu | a comma list of indices (as --list-adapters
-    /// orders them) or substrings of "name backend type" (e.g. vulkan,gl).
+    /// orders them) or substrings of "name backend type" (e.g. vulkan,gl); all, first, cpu
+    /// and gpu leave out adapters firstshot cannot run on (--list-adapters marks them).
     /// Default: all for throughput, first for convergence and scaling.
     #[arg(long, value_name = "SPEC")]
     adapters: Option<String>,
@@ -241,7 +242,8 @@ impl Slot {
     }
 }
 
-fn select_adapters(spec: &str, all: &[AdapterSummary]) -> Result<Vec<Slot>, String> {
+fn select_adapters(spec: &str, all: &[AdapterSummary], usable: &[bool]) -> Result<Vec<Slot>, String> {
+    let usable = |i: usize| usable.get(i).copied().unwrap_or(true);
     let slots = |keep: &dyn Fn(usize, &AdapterSummary) -> bool| -> Vec<Slot> {
         all.iter()
             .enumerate()
@@ -250,10 +252,10 @@ fn select_adapters(spec: &str, all: &[AdapterSummary]) -> Result<Vec<Slot>, Stri
             .collect()
     };
     let picked = match spec.to_ascii_lowercase().as_str() {
-        "all" => slots(&|_, _| true),
-        "first" => slots(&|i, _| i == 0),
-        "cpu" => slots(&|_, a| a.is_cpu()),
-        "gpu" => slots(&|_, a| !a.is_cpu() && a.device_type != "Other"),
+        "all" => slots(&|i, _| usable(i)),
+        "first" => slots(&|i, _| Some(i) == (0..all.len()).find(|&k| usable(k))),
+        "cpu" => slots(&|i, a| usable(i) && a.is_cpu()),
+        "gpu" => slots(&|i, a| usable(i) && !a.is_cpu() && a.device_type != "Other"),
         list => {
             let items: Vec<&str> = list.split(',').map(str::trim).filter(|s| !s.is_empty()).collect();
             slots(&|i, a| {
@@ -471,7 +473,11 @@ fn main() -> ExitCode {
         eprintln!("error: creating {}: {e}", config.out.display());
         return ExitCode::from(2);
     }
-    let all = list_adapters();
+    let listed = list_adapters();
+    // Adapters keep their places in the list (`--adapter INDEX`); `all`, `cpu` and `gpu`
+    // leave out those firstshot cannot run on.
+    let usable: Vec<bool> = listed.iter().map(|(_, why)| why.is_none()).collect();
+    let all: Vec<AdapterSummary> = listed.iter().map(|(a, _)| a.clone()).collect();
     let machine = machine(&all);
     println!(
         "machine: {} ({} cores), {}, load average {}",
@@ -480,10 +486,11 @@ fn main() -> ExitCode {
         machine.os,
         machine.load_average.map_or("?".into(), |l| format!("{:.2} {:.2} {:.2}", l[0], l[1], l[2]))
     );
-    for (i, a) in all.iter().enumerate() {
-        println!("adapter #{i}: {a} [{}]", a.driver);
+    for (i, (a, why)) in listed.iter().enumerate() {
+        let note = why.as_ref().map_or(String::new(), |w| format!(" (unusable: {w})"));
+        println!("adapter #{i}: {a} [{}]{note}", a.driver);
     }
-    let pick = |default: &str| select_adapters(args.adapters.as_deref().unwrap_or(default), &all);
+    let pick = |default: &str| select_adapters(args.adapters.as_deref().unwrap_or(default), &all, &usable);
     let modes: &[Mode] = match args.mode {
         Mode::All => &[Mode::Throughput, Mode::Convergence, Mode::Scaling],
         Mode::Throughput => &[Mode::Throughput],

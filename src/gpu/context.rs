@@ -144,10 +144,45 @@ fn preference(info: &wgpu::AdapterInfo) -> (u8, u8) {
     (kind, backend)
 }
 
-/// Every adapter wgpu finds, in the order `auto` prefers them.
-pub fn list_adapters() -> Vec<AdapterSummary> {
+/// What the pipeline needs beyond WebGPU's downlevel baseline: compute shaders (every stage
+/// but the rasterisation), storage buffers written by fragment shaders (the bundle's
+/// visibility, the first shot's item buffers) and read by vertex shaders (the lights'
+/// windows). An OpenGL driver older than 4.3 lacks them: NVIDIA's EGL adapter, which wgpu
+/// opens as OpenGL 3.3, failed with "Validation Error ... doesn't support COMPUTE_SHADER" at
+/// the first pipeline (H200, driver 580.159.04).
+pub const REQUIRED_DOWNLEVEL: wgpu::DownlevelFlags = wgpu::DownlevelFlags::COMPUTE_SHADERS
+    .union(wgpu::DownlevelFlags::FRAGMENT_WRITABLE_STORAGE)
+    .union(wgpu::DownlevelFlags::VERTEX_STORAGE);
+
+/// Why firstshot cannot run on an adapter with these downlevel `flags`, or `None` if it can.
+pub fn unusable(flags: wgpu::DownlevelFlags) -> Option<String> {
+    let missing = REQUIRED_DOWNLEVEL - flags;
+    if missing.is_empty() {
+        return None;
+    }
+    let names: Vec<&str> = [
+        (wgpu::DownlevelFlags::COMPUTE_SHADERS, "compute shaders"),
+        (wgpu::DownlevelFlags::FRAGMENT_WRITABLE_STORAGE, "storage writes in fragment shaders"),
+        (wgpu::DownlevelFlags::VERTEX_STORAGE, "storage reads in vertex shaders"),
+    ]
+    .into_iter()
+    .filter(|(flag, _)| missing.contains(*flag))
+    .map(|(_, name)| name)
+    .collect();
+    Some(format!(
+        "lacks {} (an OpenGL driver older than 4.3 does); use another adapter, e.g. --adapter vulkan",
+        names.join(" and ")
+    ))
+}
+
+/// Every adapter wgpu finds, in the order `auto` prefers them, each with why firstshot cannot
+/// run on it (`unusable`), if it cannot.
+pub fn list_adapters() -> Vec<(AdapterSummary, Option<String>)> {
     let _driver = driver_lock();
-    sorted_adapters(&instance()).iter().map(|a| AdapterSummary::of(&a.get_info())).collect()
+    sorted_adapters(&instance())
+        .iter()
+        .map(|a| (AdapterSummary::of(&a.get_info()), unusable(a.get_downlevel_capabilities().flags)))
+        .collect()
 }
 
 fn sorted_adapters(instance: &wgpu::Instance) -> Vec<wgpu::Adapter> {
@@ -213,13 +248,21 @@ impl Context {
     ) -> Result<Context> {
         let adapters = sorted_adapters(instance);
         let found: Vec<String> = adapters.iter().map(|a| AdapterSummary::of(&a.get_info()).to_string()).collect();
+        let any_usable = adapters.iter().any(|a| unusable(a.get_downlevel_capabilities().flags).is_none());
         let mut failures = Vec::new();
+        // Adapters that fit the choice but lack what the kernels need (`unusable`).
+        let mut lacking = Vec::new();
         // Adapters that fit the choice but cannot draw into the window.
         let mut cannot_present = Vec::new();
         for (_, adapter) in adapters.into_iter().enumerate().filter(|(i, a)| matches(choice, *i, &a.get_info())) {
             let summary = AdapterSummary::of(&adapter.get_info());
             if surface.is_some_and(|s| !adapter.is_surface_supported(s)) {
                 cannot_present.push(summary.to_string());
+                continue;
+            }
+            // Refused here, with the reason, rather than by the first pipeline's validation.
+            if let Some(why) = unusable(adapter.get_downlevel_capabilities().flags) {
+                lacking.push(format!("{summary}: {why}"));
                 continue;
             }
             let desc = wgpu::DeviceDescriptor {
@@ -263,6 +306,13 @@ impl Context {
                 "--adapter {choice}: no GPU adapter found; install a Vulkan driver (e.g. Debian's mesa-vulkan-drivers) or an OpenGL/EGL driver"
             )));
         }
+        // The choice named only adapters firstshot cannot run on while another would do: the
+        // choice's problem (status 2); with none usable at all, the machine's (status 1).
+        if failures.is_empty() && !lacking.is_empty() {
+            let message = format!("--adapter {choice}: {}; found: {}", lacking.join("; "), found.join("; "));
+            return Err(if any_usable { Error::Usage(message) } else { Error::Adapter(message) });
+        }
+        failures.extend(lacking);
         if failures.is_empty() && !cannot_present.is_empty() {
             return Err(Error::Adapter(format!(
                 "--adapter {choice}: {} cannot draw into the window; found: {}; try another --adapter",
@@ -323,5 +373,32 @@ fn record(slot: &Mutex<Option<String>>, message: String) {
         && e.is_none()
     {
         *e = Some(message);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wgpu::DownlevelFlags as F;
+
+    /// What `unusable` asks of an adapter, by the flags wgpu reports for it: a Vulkan or
+    /// OpenGL 4.3+ driver has them all; OpenGL 3.3 (NVIDIA's EGL adapter in wgpu) lacks
+    /// compute shaders and storage in the vertex and fragment stages.
+    #[test]
+    fn adapters_without_compute_shaders_are_unusable_with_the_reason_and_the_fix() {
+        assert_eq!(unusable(F::all()), None);
+        assert_eq!(unusable(REQUIRED_DOWNLEVEL), None);
+        let gl33 = F::all() - F::COMPUTE_SHADERS - F::FRAGMENT_WRITABLE_STORAGE - F::VERTEX_STORAGE;
+        let why = unusable(gl33).expect("OpenGL 3.3 is unusable");
+        for part in [
+            "compute shaders",
+            "storage writes in fragment shaders",
+            "storage reads in vertex shaders",
+            "--adapter vulkan",
+        ] {
+            assert!(why.contains(part), "{why:?} lacks {part:?}");
+        }
+        let why = unusable(F::all() - F::VERTEX_STORAGE).expect("a missing flag is unusable");
+        assert!(why.contains("storage reads in vertex shaders") && !why.contains("compute shaders"), "{why}");
     }
 }
