@@ -154,8 +154,23 @@ pub const REQUIRED_DOWNLEVEL: wgpu::DownlevelFlags = wgpu::DownlevelFlags::COMPU
     .union(wgpu::DownlevelFlags::FRAGMENT_WRITABLE_STORAGE)
     .union(wgpu::DownlevelFlags::VERTEX_STORAGE);
 
-/// Why firstshot cannot run on an adapter with these downlevel `flags`, or `None` if it can.
-pub fn unusable(flags: wgpu::DownlevelFlags) -> Option<String> {
+/// Why firstshot cannot run on an adapter (its `info` and downlevel `flags`), or `None` if it
+/// can as far as these tell (`Context::new` also builds a compute pipeline before it takes
+/// one, `cannot_compute`).
+pub fn unusable(info: &wgpu::AdapterInfo, flags: wgpu::DownlevelFlags) -> Option<String> {
+    let fix = "use another adapter, e.g. --adapter vulkan";
+    // wgpu's OpenGL backend compiles compute shaders only from GLSL 4.30 (ES 3.10) on, while
+    // its flags count an older context with the GL_ARB_compute_shader extension as able.
+    if info.backend == wgpu::Backend::Gl
+        && let Some((es, version)) = gl_version(&format!("{} {}", info.driver, info.driver_info))
+        && version < if es { (3, 1) } else { (4, 3) }
+    {
+        let (name, needed) = if es { ("OpenGL ES", "3.1") } else { ("OpenGL", "4.3") };
+        return Some(format!(
+            "lacks compute shaders: its driver offers {name} {}.{}, compute shaders need {needed}; {fix}",
+            version.0, version.1
+        ));
+    }
     let missing = REQUIRED_DOWNLEVEL - flags;
     if missing.is_empty() {
         return None;
@@ -169,10 +184,47 @@ pub fn unusable(flags: wgpu::DownlevelFlags) -> Option<String> {
     .filter(|(flag, _)| missing.contains(*flag))
     .map(|(_, name)| name)
     .collect();
-    Some(format!(
-        "lacks {} (an OpenGL driver older than 4.3 does); use another adapter, e.g. --adapter vulkan",
-        names.join(" and ")
-    ))
+    Some(format!("lacks {}; {fix}", names.join(" and ")))
+}
+
+/// The OpenGL version an OpenGL adapter's driver string starts with ("4.5 (Core Profile)
+/// Mesa 22.3.6", "3.3.0 NVIDIA 580.159.04", "OpenGL ES 3.2 Mesa ..."): whether it is
+/// OpenGL ES, and (major, minor).
+fn gl_version(driver: &str) -> Option<(bool, (u32, u32))> {
+    let text = driver.trim();
+    let (es, rest) = match text.strip_prefix("OpenGL ES") {
+        Some(rest) => (true, rest.trim_start()),
+        None => (false, text.strip_prefix("OpenGL").unwrap_or(text).trim_start()),
+    };
+    let number: String = rest.chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
+    let mut parts = number.split('.');
+    let major = parts.next()?.parse().ok()?;
+    let minor = parts.next().and_then(|m| m.parse().ok()).unwrap_or(0);
+    Some((es, (major, minor)))
+}
+
+/// Whether `device` fails to build a small compute pipeline that writes a storage buffer of
+/// runtime size, as every firstshot kernel does; the validation error if so. The last guard
+/// for a driver whose capabilities promise more than it compiles.
+fn cannot_compute(device: &wgpu::Device) -> Option<String> {
+    const PROBE: &str = "@group(0) @binding(0) var<storage, read_write> out: array<u32>;\n\
+        @compute @workgroup_size(1) fn main(@builtin(global_invocation_id) id: vec3<u32>) { out[id.x] = arrayLength(&out); }";
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("firstshot.compute_probe"),
+        source: wgpu::ShaderSource::Wgsl(PROBE.into()),
+    });
+    let _pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("firstshot.compute_probe"),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let error = pollster::block_on(scope.pop())?;
+    let detail = error.to_string().lines().map(str::trim).filter(|l| !l.is_empty()).last().unwrap_or("").to_string();
+    Some(format!("cannot build a compute pipeline ({detail}); use another adapter, e.g. --adapter vulkan"))
 }
 
 /// Every adapter wgpu finds, in the order `auto` prefers them, each with why firstshot cannot
@@ -181,7 +233,7 @@ pub fn list_adapters() -> Vec<(AdapterSummary, Option<String>)> {
     let _driver = driver_lock();
     sorted_adapters(&instance())
         .iter()
-        .map(|a| (AdapterSummary::of(&a.get_info()), unusable(a.get_downlevel_capabilities().flags)))
+        .map(|a| (AdapterSummary::of(&a.get_info()), unusable(&a.get_info(), a.get_downlevel_capabilities().flags)))
         .collect()
 }
 
@@ -248,7 +300,8 @@ impl Context {
     ) -> Result<Context> {
         let adapters = sorted_adapters(instance);
         let found: Vec<String> = adapters.iter().map(|a| AdapterSummary::of(&a.get_info()).to_string()).collect();
-        let any_usable = adapters.iter().any(|a| unusable(a.get_downlevel_capabilities().flags).is_none());
+        let any_usable =
+            adapters.iter().any(|a| unusable(&a.get_info(), a.get_downlevel_capabilities().flags).is_none());
         let mut failures = Vec::new();
         // Adapters that fit the choice but lack what the kernels need (`unusable`).
         let mut lacking = Vec::new();
@@ -261,7 +314,7 @@ impl Context {
                 continue;
             }
             // Refused here, with the reason, rather than by the first pipeline's validation.
-            if let Some(why) = unusable(adapter.get_downlevel_capabilities().flags) {
+            if let Some(why) = unusable(&adapter.get_info(), adapter.get_downlevel_capabilities().flags) {
                 lacking.push(format!("{summary}: {why}"));
                 continue;
             }
@@ -272,6 +325,9 @@ impl Context {
                 ..Default::default()
             };
             match pollster::block_on(adapter.request_device(&desc)) {
+                Ok((device, _)) if let Some(why) = cannot_compute(&device) => {
+                    lacking.push(format!("{summary}: {why}"));
+                }
                 Ok((device, queue)) => {
                     let gpu_error = Arc::new(Mutex::new(None));
                     let slot = gpu_error.clone();
@@ -381,15 +437,34 @@ mod tests {
     use super::*;
     use wgpu::DownlevelFlags as F;
 
-    /// What `unusable` asks of an adapter, by the flags wgpu reports for it: a Vulkan or
-    /// OpenGL 4.3+ driver has them all; OpenGL 3.3 (NVIDIA's EGL adapter in wgpu) lacks
-    /// compute shaders and storage in the vertex and fragment stages.
+    fn adapter(backend: wgpu::Backend, driver_info: &str) -> wgpu::AdapterInfo {
+        wgpu::AdapterInfo {
+            name: "test".into(),
+            vendor: 0,
+            device: 0,
+            device_type: wgpu::DeviceType::Other,
+            device_pci_bus_id: String::new(),
+            driver: String::new(),
+            driver_info: driver_info.into(),
+            backend,
+            subgroup_min_size: 0,
+            subgroup_max_size: 0,
+            transient_saves_memory: None,
+            limit_bucket: None,
+        }
+    }
+
+    /// What `unusable` asks of an adapter: the downlevel flags its kernels need, and on
+    /// OpenGL a version whose GLSL compiles compute shaders (4.3, ES 3.1), whatever the flags
+    /// say: NVIDIA's EGL adapter, "3.3.0 NVIDIA 580.159.04" in wgpu, reports compute
+    /// shaders by its extension and fails at the first compute pipeline.
     #[test]
     fn adapters_without_compute_shaders_are_unusable_with_the_reason_and_the_fix() {
-        assert_eq!(unusable(F::all()), None);
-        assert_eq!(unusable(REQUIRED_DOWNLEVEL), None);
-        let gl33 = F::all() - F::COMPUTE_SHADERS - F::FRAGMENT_WRITABLE_STORAGE - F::VERTEX_STORAGE;
-        let why = unusable(gl33).expect("OpenGL 3.3 is unusable");
+        let vulkan = adapter(wgpu::Backend::Vulkan, "Mesa 22.3.6");
+        assert_eq!(unusable(&vulkan, F::all()), None);
+        assert_eq!(unusable(&vulkan, REQUIRED_DOWNLEVEL), None);
+        let none = F::all() - F::COMPUTE_SHADERS - F::FRAGMENT_WRITABLE_STORAGE - F::VERTEX_STORAGE;
+        let why = unusable(&vulkan, none).expect("missing flags make it unusable");
         for part in [
             "compute shaders",
             "storage writes in fragment shaders",
@@ -398,7 +473,28 @@ mod tests {
         ] {
             assert!(why.contains(part), "{why:?} lacks {part:?}");
         }
-        let why = unusable(F::all() - F::VERTEX_STORAGE).expect("a missing flag is unusable");
+        let why = unusable(&vulkan, F::all() - F::VERTEX_STORAGE).expect("one missing flag is enough");
         assert!(why.contains("storage reads in vertex shaders") && !why.contains("compute shaders"), "{why}");
+
+        let nvidia_gl = adapter(wgpu::Backend::Gl, "3.3.0 NVIDIA 580.159.04");
+        let why = unusable(&nvidia_gl, F::all()).expect("OpenGL 3.3 cannot compile compute shaders");
+        assert!(why.contains("OpenGL 3.3") && why.contains("need 4.3") && why.contains("--adapter vulkan"), "{why}");
+        assert_eq!(unusable(&adapter(wgpu::Backend::Gl, "4.5 (Core Profile) Mesa 22.3.6"), F::all()), None);
+        assert_eq!(unusable(&adapter(wgpu::Backend::Gl, "OpenGL ES 3.2 Mesa 22.3.6"), F::all()), None);
+        let es30 = unusable(&adapter(wgpu::Backend::Gl, "OpenGL ES 3.0 Mesa"), F::all()).expect("ES 3.0 is unusable");
+        assert!(es30.contains("OpenGL ES 3.0") && es30.contains("need 3.1"), "{es30}");
+        // An unreadable version leaves the decision to the flags (and the pipeline probe).
+        assert_eq!(unusable(&adapter(wgpu::Backend::Gl, "unknown"), F::all()), None);
+    }
+
+    /// The probe `Context::new` builds on each candidate adapter compiles where the kernels do.
+    #[test]
+    fn the_compute_probe_builds_on_an_adapter_the_tests_use() {
+        let Ok(ctx) = Context::new(&AdapterChoice::Auto) else {
+            assert!(std::env::var("FIRSTSHOT_REQUIRE_GPU").map_or(true, |v| v != "1"), "no adapter");
+            eprintln!("SKIPPED (no GPU adapter)");
+            return;
+        };
+        assert_eq!(cannot_compute(&ctx.device), None, "{}", ctx.summary);
     }
 }
