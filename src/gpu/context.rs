@@ -223,7 +223,7 @@ fn cannot_compute(device: &wgpu::Device) -> Option<String> {
         cache: None,
     });
     let error = pollster::block_on(scope.pop())?;
-    let detail = error.to_string().lines().map(str::trim).filter(|l| !l.is_empty()).last().unwrap_or("").to_string();
+    let detail = error.to_string().lines().map(str::trim).rfind(|l| !l.is_empty()).unwrap_or("").to_string();
     Some(format!("cannot build a compute pipeline ({detail}); use another adapter, e.g. --adapter vulkan"))
 }
 
