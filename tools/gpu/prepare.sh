@@ -13,6 +13,15 @@
 # Usage (repository root):  [FIRSTSHOT_SIERPINSKI_REFERENCE=ref.exr] tools/gpu/prepare.sh
 # Then the study runs in one call of the device tool, carrying .gl, .whl and .gpu:
 #   bash tools/gpu/run.sh            (docs/PERFORMANCE.md, "On a GPU")
+#
+# FIRSTSHOT_GPU_TESTS=1 tools/gpu/prepare.sh also packs the GPU tests' binaries into
+# .gpu/tests/ (stripped and gzipped, about 3 MB each), for `bash tools/gpu/tests.sh` there:
+# the test suite on the GPU's own driver, which lavapipe's CI cannot be (races, a driver's
+# limits and capabilities). FIRSTSHOT_GPU_TESTS="cli views" packs only those. All 19 come to
+# about 55 MB, more than a call of the device tool carries beside the builds and the tracked
+# files (64 MiB, .whl left behind: the tests do not need it), so pack them in two halves:
+#   "brdf_gpu camera_image cli emitters first_shot firstshot hardening iteration lights"
+#   "limits per_pixel prefix_sum production profile scale scenes shards views hostile"
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 MITSUBA=3.9.1 DRJIT=1.5.0 PY=3.12
@@ -62,6 +71,29 @@ realpath . >.gpu/manifest_dir
 # Without one, the study on the GPU renders its own with cuda_ad_rgb.
 if [ -n "${FIRSTSHOT_SIERPINSKI_REFERENCE:-}" ]; then
     cp "$FIRSTSHOT_SIERPINSKI_REFERENCE" .gpu/sierpinski.full.exr
+fi
+if [ -n "${FIRSTSHOT_GPU_TESTS:-}" ]; then
+    echo "== .gpu/tests: the GPU tests' binaries"
+    # Not those that need what a bare GPU machine lacks: Mitsuba (.whl is not carried with
+    # them), Slurm, the Kubernetes schema, an X display, Debian's glTF models; nor the
+    # naga-only and host-only ones.
+    skip=" mitsuba slurm kubernetes viewer gltf harness_pure wgsl_validate kernel_bindings scene_load "
+    want=" ${FIRSTSHOT_GPU_TESTS} "
+    mkdir -p .gpu/tests && rm -f .gpu/tests/*.gz
+    cargo test --release --locked --no-run --lib --tests --message-format=json 2>/dev/null |
+        python3 -c "import sys, json
+for l in sys.stdin:
+    m = json.loads(l)
+    if m.get('reason') == 'compiler-artifact' and m.get('executable') and m['profile']['test']:
+        print(m['target']['name'], m['executable'])" |
+        while read -r name exe; do
+            case "$skip" in *" $name "*) continue ;; esac
+            [ "$FIRSTSHOT_GPU_TESTS" = 1 ] || case "$want" in *" $name "*) ;; *) continue ;; esac
+            strip -o ".gpu/tests/$name" "$exe" && gzip -9f ".gpu/tests/$name"
+        done
+    ls .gpu/tests
+    [ "$(du -sm .gpu | cut -f1)" -lt 48 ] ||
+        echo "warning: .gpu is $(du -sh .gpu | cut -f1): with the tracked files, more than a device call carries; pack fewer tests"
 fi
 du -sh .gl .whl .gpu
 echo "tracked files: $(git ls-files -z | xargs -0 du -cb | tail -1 | cut -f1) bytes"
