@@ -251,12 +251,13 @@ fn v4(v: DVec3, w: f64) -> [f32; 4] {
 /// emitting shapes are first-shot lights (their emission is then left out of the iteration)
 /// or plain emitters.
 pub fn gpu_patches(scene: &Scene, patches: &Patches, first_shot: bool) -> Vec<GpuPatch> {
+    use rayon::prelude::*;
     let black = scene.materials.len() as u32;
     let smooth = smooth_edges(patches);
     let pieces = piece_bits(patches);
     patches
         .patches
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(i, p)| {
             let mut flags = smooth.get(i).copied().unwrap_or(0);
@@ -305,26 +306,31 @@ pub fn piece_bits(patches: &Patches) -> Vec<u32> {
 /// same three corners) are no neighbours of each other. Edges are matched by sorting (about
 /// 32 bytes an edge, freed on return), not hashing, to keep a large scene's peak low.
 pub fn smooth_edges(patches: &Patches) -> Vec<u32> {
+    use rayon::prelude::*;
+    use std::sync::atomic::{AtomicU32, Ordering};
     let key = |v: DVec3| [v.x as f32, v.y as f32, v.z as f32].map(f32::to_bits);
     let corners = |i: u32| {
         let mut c = patches.patches[i as usize].vertices.map(key);
         c.sort_unstable();
         c
     };
-    // (the edge's corners in order, patch, k) of every patch's three edges.
-    let mut edges: Vec<([[u32; 3]; 2], u32, u8)> = Vec::with_capacity(3 * patches.patches.len());
-    for (i, p) in patches.patches.iter().enumerate() {
-        for k in 0..3 {
+    // (the edge's corners in order, patch, k) of every patch's three edges, on every core: at
+    // 3.3 M patches the sort took 2 of the 4 s of the upload on one (docs/PERFORMANCE.md,
+    // "Scaling"). Indexed, so that the list is built in place at its size (no second copy at
+    // the peak); the flags do not depend on the order within a run.
+    let mut edges: Vec<([[u32; 3]; 2], u32, u8)> = Vec::new();
+    (0..3 * patches.patches.len())
+        .into_par_iter()
+        .map(|e| {
+            let (i, k) = (e / 3, e % 3);
+            let p = &patches.patches[i];
             let (a, b) = (key(p.vertices[(k + 1) % 3]), key(p.vertices[(k + 2) % 3]));
-            edges.push(([a.min(b), a.max(b)], i as u32, k as u8));
-        }
-    }
-    edges.sort_unstable_by_key(|e| e.0);
-    let mut flags = vec![0u32; patches.patches.len()];
-    for run in edges.chunk_by(|x, y| x.0 == y.0) {
-        if run.len() < 2 {
-            continue;
-        }
+            ([a.min(b), a.max(b)], i as u32, k as u8)
+        })
+        .collect_into_vec(&mut edges);
+    edges.par_sort_unstable_by_key(|e| e.0);
+    let flags: Vec<AtomicU32> = (0..patches.patches.len()).map(|_| AtomicU32::new(0)).collect();
+    edges.par_chunk_by(|x, y| x.0 == y.0).filter(|run| run.len() >= 2).for_each(|run| {
         for &(_, i, k) in run {
             let n = patches.patches[i as usize].normal;
             let smooth = run.iter().any(|&(_, other, _)| {
@@ -333,11 +339,11 @@ pub fn smooth_edges(patches: &Patches) -> Vec<u32> {
                     && corners(other) != corners(i)
             });
             if smooth {
-                flags[i as usize] |= PATCH_SMOOTH_EDGE << k;
+                flags[i as usize].fetch_or(PATCH_SMOOTH_EDGE << k, Ordering::Relaxed);
             }
         }
-    }
-    flags
+    });
+    flags.into_iter().map(AtomicU32::into_inner).collect()
 }
 
 /// T A_t for a patch of a first-shot emitting shape: the area that a direct-light pass's
@@ -686,6 +692,52 @@ mod tests {
         assert!(in_piece(j + PIECE_REACH, j, bits[j as usize]) && !in_piece(j + PIECE_REACH + 1, j, bits[j as usize]));
         assert!(in_piece(11 + long - 1, 11 + long - 1, bits[(11 + long - 1) as usize]));
         assert!(!in_piece(11 + long, 11 + long - 1, bits[(11 + long - 1) as usize]));
+    }
+
+    /// `smooth_edges` (sorted on every core) against the rule read plainly: every pair of
+    /// patches that share an edge's two f32 corners, found through a map, on the shipped
+    /// Sierpinski room (22 k patches: the fractal's creases and the walls' lattices),
+    /// sun_room (boxes, a window's outline) and the benchmarks' glossy gallery (a two-sided
+    /// screen, whose two sides share their corners and are no neighbours).
+    #[test]
+    fn smooth_edges_on_every_core_are_the_plain_rules() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        for name in ["scenes/sierpinski.toml", "scenes/sun_room.toml", "benches/scenes/glossy_gallery.toml"] {
+            let scene = crate::scene::load::load(&root.join(name)).unwrap();
+            let patches = crate::scene::tessellate(&scene, scene.settings.patch_size).unwrap();
+            let key = |v: DVec3| [v.x as f32, v.y as f32, v.z as f32].map(f32::to_bits);
+            let mut sharing: std::collections::HashMap<[[u32; 3]; 2], Vec<(usize, usize)>> = Default::default();
+            for (i, p) in patches.patches.iter().enumerate() {
+                for k in 0..3 {
+                    let (a, b) = (key(p.vertices[(k + 1) % 3]), key(p.vertices[(k + 2) % 3]));
+                    sharing.entry([a.min(b), a.max(b)]).or_default().push((i, k));
+                }
+            }
+            let same_triangle = |i: usize, j: usize| {
+                let mut a = patches.patches[i].vertices.map(key);
+                let mut b = patches.patches[j].vertices.map(key);
+                a.sort_unstable();
+                b.sort_unstable();
+                a == b
+            };
+            let mut expected = vec![0u32; patches.patches.len()];
+            for list in sharing.values() {
+                for &(i, k) in list {
+                    let n = patches.patches[i].normal;
+                    if list.iter().any(|&(j, _)| {
+                        j != i
+                            && patches.patches[j].normal.dot(n).abs() >= SMOOTH_EDGE_COS as f64
+                            && !same_triangle(i, j)
+                    }) {
+                        expected[i] |= PATCH_SMOOTH_EDGE << k;
+                    }
+                }
+            }
+            let flags = smooth_edges(&patches);
+            let smooth = flags.iter().map(|f| f.count_ones()).sum::<u32>();
+            assert!(smooth > 0 && (smooth as usize) < 3 * patches.patches.len(), "{name}: {smooth} smooth edges");
+            assert_eq!(flags, expected, "{name}");
+        }
     }
 
     /// A floor quad cut into patches, a box standing on it and a two-sided square: which
