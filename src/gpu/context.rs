@@ -147,9 +147,10 @@ fn preference(info: &wgpu::AdapterInfo) -> (u8, u8) {
 /// What the pipeline needs beyond WebGPU's downlevel baseline: compute shaders (every stage
 /// but the rasterisation), storage buffers written by fragment shaders (the bundle's
 /// visibility, the first shot's item buffers) and read by vertex shaders (the lights'
-/// windows). An OpenGL driver older than 4.3 lacks them: NVIDIA's EGL adapter, which wgpu
-/// opens as OpenGL 3.3, failed with "Validation Error ... doesn't support COMPUTE_SHADER" at
-/// the first pipeline (H200, driver 580.159.04).
+/// windows). An OpenGL driver older than 4.3 lacks them, though wgpu may report compute
+/// shaders for one by an extension: NVIDIA's EGL adapter, which wgpu opens as OpenGL 3.3,
+/// did, and failed with "Validation Error ... doesn't support COMPUTE_SHADER" at the first
+/// pipeline (H200, driver 580.159.04); so `unusable` reads the OpenGL version too.
 pub const REQUIRED_DOWNLEVEL: wgpu::DownlevelFlags = wgpu::DownlevelFlags::COMPUTE_SHADERS
     .union(wgpu::DownlevelFlags::FRAGMENT_WRITABLE_STORAGE)
     .union(wgpu::DownlevelFlags::VERTEX_STORAGE);
