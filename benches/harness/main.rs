@@ -244,6 +244,7 @@ impl Slot {
 
 fn select_adapters(spec: &str, all: &[AdapterSummary], usable: &[bool]) -> Result<Vec<Slot>, String> {
     let usable = |i: usize| usable.get(i).copied().unwrap_or(true);
+    let first_usable = (0..all.len()).find(|&i| usable(i));
     let slots = |keep: &dyn Fn(usize, &AdapterSummary) -> bool| -> Vec<Slot> {
         all.iter()
             .enumerate()
@@ -253,7 +254,7 @@ fn select_adapters(spec: &str, all: &[AdapterSummary], usable: &[bool]) -> Resul
     };
     let picked = match spec.to_ascii_lowercase().as_str() {
         "all" => slots(&|i, _| usable(i)),
-        "first" => slots(&|i, _| Some(i) == (0..all.len()).find(|&k| usable(k))),
+        "first" => slots(&|i, _| Some(i) == first_usable),
         "cpu" => slots(&|i, a| usable(i) && a.is_cpu()),
         "gpu" => slots(&|i, a| usable(i) && !a.is_cpu() && a.device_type != "Other"),
         list => {

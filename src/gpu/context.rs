@@ -159,7 +159,7 @@ pub const REQUIRED_DOWNLEVEL: wgpu::DownlevelFlags = wgpu::DownlevelFlags::COMPU
 /// can as far as these tell (`Context::new` also builds a compute pipeline before it takes
 /// one, `cannot_compute`).
 pub fn unusable(info: &wgpu::AdapterInfo, flags: wgpu::DownlevelFlags) -> Option<String> {
-    let fix = "use another adapter, e.g. --adapter vulkan";
+    let fix = USE_ANOTHER_ADAPTER;
     // wgpu's OpenGL backend compiles compute shaders only from GLSL 4.30 (ES 3.10) on, while
     // its flags count an older context with the GL_ARB_compute_shader extension as able.
     if info.backend == wgpu::Backend::Gl
@@ -186,6 +186,14 @@ pub fn unusable(info: &wgpu::AdapterInfo, flags: wgpu::DownlevelFlags) -> Option
     .map(|(_, name)| name)
     .collect();
     Some(format!("lacks {}; {fix}", names.join(" and ")))
+}
+
+/// What an unusable adapter's message ends with.
+const USE_ANOTHER_ADAPTER: &str = "use another adapter, e.g. --adapter vulkan";
+
+/// `unusable` of a found adapter.
+fn adapter_unusable(adapter: &wgpu::Adapter) -> Option<String> {
+    unusable(&adapter.get_info(), adapter.get_downlevel_capabilities().flags)
 }
 
 /// The OpenGL version an OpenGL adapter's driver string starts with ("4.5 (Core Profile)
@@ -225,17 +233,14 @@ fn cannot_compute(device: &wgpu::Device) -> Option<String> {
     });
     let error = pollster::block_on(scope.pop())?;
     let detail = error.to_string().lines().map(str::trim).rfind(|l| !l.is_empty()).unwrap_or("").to_string();
-    Some(format!("cannot build a compute pipeline ({detail}); use another adapter, e.g. --adapter vulkan"))
+    Some(format!("cannot build a compute pipeline ({detail}); {USE_ANOTHER_ADAPTER}"))
 }
 
 /// Every adapter wgpu finds, in the order `auto` prefers them, each with why firstshot cannot
 /// run on it (`unusable`), if it cannot.
 pub fn list_adapters() -> Vec<(AdapterSummary, Option<String>)> {
     let _driver = driver_lock();
-    sorted_adapters(&instance())
-        .iter()
-        .map(|a| (AdapterSummary::of(&a.get_info()), unusable(&a.get_info(), a.get_downlevel_capabilities().flags)))
-        .collect()
+    sorted_adapters(&instance()).iter().map(|a| (AdapterSummary::of(&a.get_info()), adapter_unusable(a))).collect()
 }
 
 fn sorted_adapters(instance: &wgpu::Instance) -> Vec<wgpu::Adapter> {
@@ -301,21 +306,24 @@ impl Context {
     ) -> Result<Context> {
         let adapters = sorted_adapters(instance);
         let found: Vec<String> = adapters.iter().map(|a| AdapterSummary::of(&a.get_info()).to_string()).collect();
-        let any_usable =
-            adapters.iter().any(|a| unusable(&a.get_info(), a.get_downlevel_capabilities().flags).is_none());
+        // Why each adapter is unusable, if it is: asked once.
+        let unusable: Vec<Option<String>> = adapters.iter().map(adapter_unusable).collect();
+        let any_usable = unusable.iter().any(Option::is_none);
         let mut failures = Vec::new();
         // Adapters that fit the choice but lack what the kernels need (`unusable`).
         let mut lacking = Vec::new();
         // Adapters that fit the choice but cannot draw into the window.
         let mut cannot_present = Vec::new();
-        for (_, adapter) in adapters.into_iter().enumerate().filter(|(i, a)| matches(choice, *i, &a.get_info())) {
+        for ((_, adapter), why) in
+            adapters.into_iter().enumerate().zip(unusable).filter(|((i, a), _)| matches(choice, *i, &a.get_info()))
+        {
             let summary = AdapterSummary::of(&adapter.get_info());
             if surface.is_some_and(|s| !adapter.is_surface_supported(s)) {
                 cannot_present.push(summary.to_string());
                 continue;
             }
             // Refused here, with the reason, rather than by the first pipeline's validation.
-            if let Some(why) = unusable(&adapter.get_info(), adapter.get_downlevel_capabilities().flags) {
+            if let Some(why) = why {
                 lacking.push(format!("{summary}: {why}"));
                 continue;
             }

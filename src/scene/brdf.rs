@@ -268,6 +268,8 @@ fn gauss_legendre(from: f64, to: f64, f: impl Fn(f64) -> f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand_core::{RngCore, SeedableRng};
+    use rand_pcg::Pcg64;
 
     #[test]
     fn glossy_control_weight_is_one_for_broad_lobes_and_a_half_for_sharp_ones() {
@@ -294,8 +296,6 @@ mod tests {
             assert!((m1 * m1 / m2 - share).abs() < 1e-6, "n = {n}: {} against {share}", m1 * m1 / m2);
         }
     }
-    use rand_core::{RngCore, SeedableRng};
-    use rand_pcg::Pcg64;
 
     /// The quadrature against closed forms: far below the 1e-4 the loader needs.
     const QUADRATURE: f64 = 1e-8;
