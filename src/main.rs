@@ -15,6 +15,7 @@ use firstshot::image::Image as RenderedImage;
 use firstshot::image::{Image, image_error};
 use firstshot::render::{Hooks, RenderOptions, render_with};
 use firstshot::scene;
+use firstshot::stages::image_estimate::GatherChoice;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -137,6 +138,11 @@ pub(crate) struct RenderArgs {
     /// meets it (the default, unless a light is an emitting shape).
     #[arg(long)]
     patch_first_bounce: bool,
+    /// How the image's gather finishes the pixels near a patch's edge or beside a near
+    /// surface: `fused` in its one pass, `split` in passes of their own, `auto` by the
+    /// adapter (split on a CPU adapter, fused on a GPU). The image is the same.
+    #[arg(long, value_name = "auto|fused|split", value_parser = parse_gather, default_value = "auto")]
+    gather: GatherChoice,
     /// The camera to render, by name: "camera" for the [camera] table, or a [[cameras]]
     /// entry's name (default: the first of the scene's cameras).
     #[arg(long, value_name = "NAME")]
@@ -471,6 +477,7 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     options.burn_in = args.burn_in.or(options.burn_in);
     options.memory_limit = args.memory_limit.map(|mib| mib << 20);
     options.patch_first_bounce |= args.patch_first_bounce;
+    options.gather = args.gather;
     if let Some(b) = args.bundles_per_step {
         options.bundles_per_step = b.0;
     }
@@ -800,5 +807,14 @@ fn parse_bundles_per_step(value: &str) -> std::result::Result<BundlesPerStep, St
             .filter(|n| choices.contains(n))
             .map(|n| BundlesPerStep(Some(n)))
             .ok_or_else(|| format!("expected 1, 4 or \"auto\", got {value:?}")),
+    }
+}
+
+fn parse_gather(value: &str) -> std::result::Result<GatherChoice, String> {
+    match value {
+        "auto" => Ok(GatherChoice::Auto),
+        "fused" => Ok(GatherChoice::Fused),
+        "split" => Ok(GatherChoice::Split),
+        _ => Err(format!("expected \"auto\", \"fused\" or \"split\", got {value:?}")),
     }
 }

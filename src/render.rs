@@ -148,6 +148,9 @@ pub struct RenderOptions {
     /// (the paper's Lfs_j at the patch's centre) instead of per point
     /// (`first_bounce_per_point`, docs/ALGORITHM.md 6).
     pub patch_first_bounce: bool,
+    /// Whether the gather finishes every pixel in one pass or lists some for passes of their
+    /// own (`image_estimate::fused_gather`: by the adapter unless asked; the same image).
+    pub gather: crate::stages::image_estimate::GatherChoice,
 }
 
 impl RenderOptions {
@@ -174,6 +177,7 @@ impl RenderOptions {
             cameras: Vec::new(),
             bundles_per_step: scene.settings.bundles_per_step,
             patch_first_bounce: false,
+            gather: Default::default(),
         }
     }
 
@@ -823,7 +827,7 @@ impl<'a> Renderer<'a> {
                 band_rows,
                 stride,
                 per_point,
-                crate::stages::image_estimate::list_workgroups(&ctx.summary),
+                crate::stages::image_estimate::fused_gather(&ctx.summary, options.gather),
                 like.map(|v| &v.estimate),
             );
             estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);

@@ -10,6 +10,7 @@ use common::scratch::Scratch;
 use firstshot::image::Image;
 use firstshot::render::{RenderOptions, render};
 use firstshot::scene::{self, Light, Scene};
+use firstshot::stages::image_estimate::GatherChoice;
 use glam::DVec3;
 
 const FLOOR_AND_OCCLUDER: &str = r#"
@@ -980,5 +981,40 @@ fn test18_a_broad_lobe_under_a_uniform_sky_keeps_little_of_its_shapes_noise() {
         .collect();
     for (seed, rms) in (1..).zip(errors) {
         assert!(rms < 0.1, "seed {seed}: RMS relative error {rms:.4}: the lobe's shape is still in the estimate");
+    }
+}
+
+#[test]
+fn test19_the_fused_gather_renders_the_split_gathers_image() {
+    // `gather` finishes every pixel itself on a GPU (FUSED_GATHER: the pixels near their
+    // patch's edge take `gather_edges`'s code inline, those with a near sender
+    // `gather_first_bounce`'s), and lists them for those passes on a CPU adapter
+    // (`image_estimate::fused_gather`). Both must give the same image, to the float rounding
+    // of the sums' order: the Sierpinski scene (a fractal of small triangles, so many pixels
+    // near an edge, one bundle a step), cornell_point (a point light: near senders' first
+    // bounce per point; glossy) and the Cornell box (four bundles a step, each pixel of a
+    // 2 x 2 block through its own; an area light), the last in bands of 7 rows.
+    let Some(ctx) = common::gpu() else { return };
+    for (name, bands) in [("sierpinski", None), ("cornell_point", None), ("cornell_box", Some(7))] {
+        let scene = scene::load(&common::scenes::shipped(name)).unwrap();
+        let mut options = RenderOptions::from_scene(&scene);
+        (options.width, options.height, options.iterations, options.burn_in) = (40, 40, 6, Some(2));
+        options.image_band_rows = bands;
+        let patches = scene::tessellate(&scene, options.patch_size).unwrap();
+        let mut images = [GatherChoice::Split, GatherChoice::Fused].map(|gather| {
+            let options = RenderOptions { gather, ..options.clone() };
+            render(&ctx, &scene, &patches, &options).unwrap().image
+        });
+        let [split, fused] = &mut images;
+        let (mut worst, mut differ) = (0f32, 0usize);
+        for (a, b) in fused.pixels.iter().zip(&split.pixels) {
+            differ += (a != b) as usize;
+            for c in 0..3 {
+                worst = worst.max((a[c] - b[c]).abs() / b[c].abs().max(1e-3));
+            }
+        }
+        eprintln!("{name}: largest relative difference {worst:e}, {differ} pixels not equal to the bit");
+        assert!(split.mean()[0] > 0.01, "{name}: the image is lit");
+        assert!(worst < 1e-5, "{name}: the fused gather differs from the split one by {worst:e}");
     }
 }

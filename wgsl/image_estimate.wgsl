@@ -77,6 +77,15 @@ override SEEN_IN_GATHER: bool = false;
 // emitting shape (`render::first_bounce_per_point`).
 override FIRST_BOUNCE_PER_POINT: bool = false;
 
+// True where `gather` finishes every pixel itself: the pixels it would list for
+// `gather_edges` (near their patch's edge) and for `gather_first_bounce` (a near sender) take
+// those passes' code inline, and the host records neither pass nor the lists' clears. A GPU
+// pays for each pass of a view's step (a dispatch, a barrier, the host's recording: about
+// a third of a small scene's view on an H200), while its diverging lanes cost little; a CPU
+// adapter runs both sides of every branch for each vector of 8 pixels, so there the split
+// passes stay (`image_estimate::fused_gather` chooses, docs/PERFORMANCE.md).
+override FUSED_GATHER: bool = false;
+
 // False where no patch is a first-shot emitting shape whose light D and G share
 // (`SceneBuffers::shared_emitters`): the sharing's code is then left out of every pixel's
 // gather and direct light (params.mis still says whether this run shares).
@@ -464,15 +473,21 @@ fn received_const(radiance: vec3<f32>, decided: bool) -> Received {
     return Received(radiance, decided, NO_PATCH);
 }
 
-// Lists `pixel` for `gather_first_bounce` (near_senders: [0] the count, then pixel and sender
-// id a pair) where the host asks for first bounces per point and x's sender is near.
-fn list_near_sender(received: Received, x: vec3<f32>, toward: vec3<f32>, pixel: u32) {
+// Whether x's sender is near (where the host asks for first bounces per point): x's ray
+// meets its plane within NEAR_SENDER of its patch's width.
+fn is_near_sender(received: Received, x: vec3<f32>, toward: vec3<f32>) -> bool {
     if (!FIRST_BOUNCE_PER_POINT || received.sender == NO_PATCH) {
-        return;
+        return false;
     }
     let m = received.sender - 1u;
     let t = sender_point(m, x, toward).w;
-    if (t * t < NEAR_SENDER * NEAR_SENDER * patches_at(m).v0.w) {
+    return t * t < NEAR_SENDER * NEAR_SENDER * patches_at(m).v0.w;
+}
+
+// Lists `pixel` for `gather_first_bounce` (near_senders: [0] the count, then pixel and sender
+// id a pair) where the host asks for first bounces per point and x's sender is near.
+fn list_near_sender(received: Received, x: vec3<f32>, toward: vec3<f32>, pixel: u32) {
+    if (is_near_sender(received, x, toward)) {
         let listed = atomicAdd(&near_senders[0], 1u);
         atomicStore(&near_senders[2u * listed + 1u], pixel);
         atomicStore(&near_senders[2u * listed + 2u], received.sender);
@@ -918,18 +933,28 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         let s = bundle_side(at.n, d);
         let toward = s * d;
         let line = on_line(at.x, s);
-        let received = own_received(at.j, at.x, toward, line);
+        var received = own_received(at.j, at.x, toward, line);
         if (!received.decided) {
-            // With x's place on its line, so that gather_edges need not search it again.
-            let listed = atomicAdd(&edges[0], 1u);
-            atomicStore(&edges[2u * listed + 1u], pixel);
-            atomicStore(&edges[2u * listed + 2u], line.lo);
-            // Le here, with a count of 0; G and the count in gather_edges (Le in its loop
-            // made that pass twice as slow on lavapipe).
-            image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 0.0);
-            return;
+            if (FUSED_GATHER) {
+                received = edge_received(at, toward, s, line.lo);
+            } else {
+                // With x's place on its line, so that gather_edges need not search it again.
+                let listed = atomicAdd(&edges[0], 1u);
+                atomicStore(&edges[2u * listed + 1u], pixel);
+                atomicStore(&edges[2u * listed + 2u], line.lo);
+                // Le here, with a count of 0; G and the count in gather_edges (Le in its loop
+                // made that pass twice as slow on lavapipe).
+                image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 0.0);
+                return;
+            }
         }
-        list_near_sender(received, at.x, toward, pixel);
+        if (FUSED_GATHER) {
+            if (is_near_sender(received, at.x, toward)) {
+                radiance += first_bounce_correction(at, received.sender - 1u, toward);
+            }
+        } else {
+            list_near_sender(received, at.x, toward, pixel);
+        }
         radiance += gather_radiance(at, received.radiance, toward);
     }
     image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 1.0);
@@ -943,6 +968,57 @@ fn beside_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, cell: vec2<i
         return received_const(vec3<f32>(0.0), false);
     }
     return own_received(j, x, toward, search(line, x, s));
+}
+
+// What x receives where its own line did not decide (`own_received`): the lines beside x's
+// own, then the candidates on x's line (its place on it `lo`), then the lines beside again,
+// then the environment. `gather_edges` for the pixels `gather` listed, or `gather` itself
+// (FUSED_GATHER).
+fn edge_received(at: Seen, toward: vec3<f32>, s: f32, lo: u32) -> Received {
+    // The lines beside x's own toward x's point in its cell, the nearer first, then the
+    // diagonal one: where one holds j's own fragment near x's depth, x receives what j
+    // receives there, as `gather` does on x's own line (a point of j at most a line and a
+    // half from x). Only where none does (j crossed by no line near x: a patch smaller
+    // than a line), the candidates on x's own line decide (`nearest_received`).
+    let cell = cell_of(at.x);
+    let base = vec2<i32>(floor(cell));
+    let f = cell - floor(cell);
+    let side = vec2<i32>(select(-1, 1, f.x >= 0.5), select(-1, 1, f.y >= 0.5));
+    var first = vec2<i32>(side.x, 0);
+    var second = vec2<i32>(0, side.y);
+    if (abs(f.y - 0.5) > abs(f.x - 0.5)) {
+        first = vec2<i32>(0, side.y);
+        second = vec2<i32>(side.x, 0);
+    }
+    var received = beside_received(at.j, at.x, toward, s, base + first);
+    if (!received.decided) {
+        received = beside_received(at.j, at.x, toward, s, base + second);
+    }
+    if (!received.decided) {
+        received = beside_received(at.j, at.x, toward, s, base + side);
+    }
+    if (!received.decided) {
+        var line = line_at(base);
+        line.lo = lo;
+        received = nearest_received(at.j, at.x, toward, s, line);
+    }
+    // Nothing ahead on x's own line: it may pass outside the surfaces right beside x, as
+    // past a room's crease, where x's ray meets the other wall at once but the line, half
+    // a line off x, misses both walls and leaves the scene. Answering the environment
+    // there lit every crease of a closed room with the sky outside it (its pixels up to
+    // 18 % of the sky). So the lines beside x decide, by the same rules; only where
+    // nothing lies ahead on them either does x see the environment.
+    // A loop, not three calls: each inlined copy of the search grows the kernel, and with
+    // the paged accessors of a large scene three copies took lavapipe minutes to compile
+    // (tests/scale.rs from 20 s to over 3 minutes). Few pixels get here.
+    let beside = array<vec2<i32>, 3>(base + first, base + second, base + side);
+    for (var c = 0u; c < 3u && !received.decided; c++) {
+        received = beside_nearest(at.j, at.x, toward, s, beside[c]);
+    }
+    if (!received.decided) {
+        received = received_const(bundle.environment.rgb, true);
+    }
+    return received;
 }
 
 // `gather_edges` and `gather_first_bounce` run on a fixed grid of workgroups of 64 (the
@@ -962,49 +1038,7 @@ fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
         let d = bundle.direction.xyz;
         let s = bundle_side(at.n, d);
         let toward = s * d;
-        // The lines beside x's own toward x's point in its cell, the nearer first, then the
-        // diagonal one: where one holds j's own fragment near x's depth, x receives what j
-        // receives there, as `gather` does on x's own line (a point of j at most a line and a
-        // half from x). Only where none does (j crossed by no line near x: a patch smaller
-        // than a line), the candidates on x's own line decide (`nearest_received`).
-        let cell = cell_of(at.x);
-        let base = vec2<i32>(floor(cell));
-        let f = cell - floor(cell);
-        let side = vec2<i32>(select(-1, 1, f.x >= 0.5), select(-1, 1, f.y >= 0.5));
-        var first = vec2<i32>(side.x, 0);
-        var second = vec2<i32>(0, side.y);
-        if (abs(f.y - 0.5) > abs(f.x - 0.5)) {
-            first = vec2<i32>(0, side.y);
-            second = vec2<i32>(side.x, 0);
-        }
-        var received = beside_received(at.j, at.x, toward, s, base + first);
-        if (!received.decided) {
-            received = beside_received(at.j, at.x, toward, s, base + second);
-        }
-        if (!received.decided) {
-            received = beside_received(at.j, at.x, toward, s, base + side);
-        }
-        if (!received.decided) {
-            var line = line_at(base);
-            line.lo = atomicLoad(&edges[2u * i + 2u]);
-            received = nearest_received(at.j, at.x, toward, s, line);
-        }
-        // Nothing ahead on x's own line: it may pass outside the surfaces right beside x, as
-        // past a room's crease, where x's ray meets the other wall at once but the line, half
-        // a line off x, misses both walls and leaves the scene. Answering the environment
-        // there lit every crease of a closed room with the sky outside it (its pixels up to
-        // 18 % of the sky). So the lines beside x decide, by the same rules; only where
-        // nothing lies ahead on them either does x see the environment.
-        // A loop, not three calls: each inlined copy of the search grows the kernel, and with
-        // the paged accessors of a large scene three copies took lavapipe minutes to compile
-        // (tests/scale.rs from 20 s to over 3 minutes). Few pixels get here.
-        let beside = array<vec2<i32>, 3>(base + first, base + second, base + side);
-        for (var c = 0u; c < 3u && !received.decided; c++) {
-            received = beside_nearest(at.j, at.x, toward, s, beside[c]);
-        }
-        if (!received.decided) {
-            received = received_const(bundle.environment.rgb, true);
-        }
+        let received = edge_received(at, toward, s, atomicLoad(&edges[2u * i + 2u]));
         list_near_sender(received, at.x, toward, pixel);
         image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_radiance(at, received.radiance, toward), 1.0);
     }
@@ -1040,6 +1074,17 @@ fn gather_weight(at: Seen, toward: vec3<f32>) -> vec3<f32> {
     return weight;
 }
 
+// What G gains at x (seen `at`, receiving along `toward`) from near sender m's first
+// reflection of the lights at the point y its ray meets, D(y, -toward), in place of the
+// patch-level Lfs_m: G is linear in what arrives, so the difference times G's weight.
+fn first_bounce_correction(at: Seen, m: u32, toward: vec3<f32>) -> vec3<f32> {
+    let y = sender_point(m, at.x, toward).xyz;
+    let n = patches_at(m).normal.xyz;
+    let per_point = direct_light(m, y, n, materials[patches_at(m).material], -toward);
+    let lfs = unpack_first_bounce(image_outgoing_at(m).w, image_mean_radiance_at(m).w);
+    return gather_weight(at, toward) * (per_point - lfs);
+}
+
 // For the pixels `gather` and `gather_edges` listed in `near_senders` (a near sender m):
 // G with m's first reflection of the lights at the point y that x's ray meets, with y's own
 // visibility of each light, D(y, -toward), in place of the patch-level Lfs_m that `gather`
@@ -1056,11 +1101,6 @@ fn gather_first_bounce(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(n
         let m = atomicLoad(&near_senders[2u * i + 2u]) - 1u;
         let at = seen(vec2<u32>(pixel % size.x, pixel / size.x + params.first_row));
         let toward = bundle_side(at.n, bundle.direction.xyz) * bundle.direction.xyz;
-        let y = sender_point(m, at.x, toward).xyz;
-        let n = patches_at(m).normal.xyz;
-        let per_point = direct_light(m, y, n, materials[patches_at(m).material], -toward);
-        let lfs = unpack_first_bounce(image_outgoing_at(m).w, image_mean_radiance_at(m).w);
-        let difference = per_point - lfs;
-        image_sum[pixel] = image_sum[pixel] + vec4<f32>(gather_weight(at, toward) * difference, 0.0);
+        image_sum[pixel] = image_sum[pixel] + vec4<f32>(first_bounce_correction(at, m, toward), 0.0);
     }
 }

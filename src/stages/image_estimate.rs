@@ -109,7 +109,8 @@ pub struct ImageEstimate {
     built: Kernel,
     direct_pipeline: wgpu::ComputePipeline,
     gather_pipeline: wgpu::ComputePipeline,
-    edges_pipeline: wgpu::ComputePipeline,
+    /// `gather_edges`, where the gather's passes are split.
+    edges_pipeline: Option<wgpu::ComputePipeline>,
     /// `gather_first_bounce`, where the gathers list near senders (`first_bounce_per_point`).
     first_bounce_pipeline: Option<wgpu::ComputePipeline>,
     bands: Vec<Band>,
@@ -120,8 +121,47 @@ pub struct ImageEstimate {
     /// 1, or 2 when a step has four bundles and each gathers one pixel of every 2 x 2
     /// (`iteration::pixel_stride`): the gather's grid is this much smaller on each side.
     pixel_stride: u32,
-    /// The grid of `gather_edges` and `gather_first_bounce` (`list_workgroups`).
-    list_workgroups: u32,
+    /// How a gather's pixels are finished: in `gather` itself, or in the list passes.
+    passes: GatherPasses,
+}
+
+/// How `gather` finishes the pixels near their patch's edge and those with a near sender:
+/// inline (`FUSED_GATHER` in `wgsl/image_estimate.wgsl`: one dispatch a gather), or by
+/// listing them for `gather_edges` and `gather_first_bounce` (two lists cleared and three
+/// dispatches a gather). The image is the same either way, up to the order of its float sums.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GatherPasses {
+    Fused,
+    /// The list passes on a fixed grid of this many workgroups (`list_workgroups`).
+    Split {
+        list_workgroups: u32,
+    },
+}
+
+/// Which of `GatherPasses` a run asks for (`--gather`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum GatherChoice {
+    /// `fused_gather`'s rule for the adapter.
+    #[default]
+    Auto,
+    Fused,
+    Split,
+}
+
+/// The gather's passes on `adapter`: split on a CPU adapter, fused on any other (unless
+/// `choice` says). Lavapipe runs a shader 8 lanes to a vector and pays for a branch whenever
+/// one lane takes it, so there the few pixels near an edge or a near sender cost least in
+/// passes of their own (the split took a fifth off the Cornell box's gather, docs/
+/// PERFORMANCE.md). A GPU pays instead for each pass of every view's step: a dispatch, a
+/// barrier and the host's recording of both (docs/PERFORMANCE.md, "Views on the GPU").
+pub fn fused_gather(adapter: &crate::gpu::AdapterSummary, choice: GatherChoice) -> GatherPasses {
+    let split = GatherPasses::Split { list_workgroups: list_workgroups(adapter) };
+    match choice {
+        GatherChoice::Fused => GatherPasses::Fused,
+        GatherChoice::Split => split,
+        GatherChoice::Auto if adapter.is_cpu() => split,
+        GatherChoice::Auto => GatherPasses::Fused,
+    }
 }
 
 /// Workgroups (of 64) of `gather_edges` and `gather_first_bounce`, which stride over the
@@ -141,7 +181,7 @@ impl ImageEstimate {
     /// `pixel_stride`: `iteration::pixel_stride` of the step's bundles.
     /// `first_bounce_per_point`: the gather evaluates each sender's first reflection of the
     /// lights at the point it sees (`render::first_bounce_per_point`).
-    /// `list_workgroups`: the grid of the passes over the gather's lists (`list_workgroups`).
+    /// `passes`: how the gather finishes its pixels (`fused_gather`).
     /// `like`: the estimate of another view of the same render, whose kernel and pipelines
     /// this one shares (they depend on the scene's paging and lights, not on the camera).
     #[allow(clippy::too_many_arguments)]
@@ -154,7 +194,7 @@ impl ImageEstimate {
         band_rows: u32,
         pixel_stride: u32,
         first_bounce_per_point: bool,
-        list_workgroups: u32,
+        passes: GatherPasses,
         like: Option<&Self>,
     ) -> Self {
         let (built, direct_pipeline, gather_pipeline, edges_pipeline, first_bounce_pipeline) = match like {
@@ -173,7 +213,18 @@ impl ImageEstimate {
                 let with_scene = |constants: &[(&'static str, f64)]| [constants, &scene.constants()].concat();
                 let lights = with_scene(&direct.specialization());
                 let per_point = with_scene(&[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)]);
-                let gather = [&[("SEEN_IN_GATHER", 1.0)], per_point.as_slice()].concat();
+                // Fused, the gather evaluates the direct light at near senders' points itself,
+                // so it is compiled for the lights too.
+                let gather = match passes {
+                    GatherPasses::Fused => [
+                        &[("SEEN_IN_GATHER", 1.0), ("FUSED_GATHER", 1.0)],
+                        lights.as_slice(),
+                        &[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)],
+                    ]
+                    .concat(),
+                    GatherPasses::Split { .. } => [&[("SEEN_IN_GATHER", 1.0)], per_point.as_slice()].concat(),
+                };
+                let split = matches!(passes, GatherPasses::Split { .. });
                 // Built side by side: a CPU adapter compiles each pipeline on the thread that
                 // asks for it (about 190 ms for the four on lavapipe, one after another).
                 let pipelines = std::thread::scope(|threads| {
@@ -184,16 +235,17 @@ impl ImageEstimate {
                     };
                     let direct_pipeline = build("direct", &lights);
                     let gather_pipeline = build("gather", &gather);
-                    let edges_pipeline = build("gather_edges", &per_point);
+                    let edges_pipeline = split.then(|| build("gather_edges", &per_point));
                     // The direct light at the near senders' points, compiled like `direct`.
-                    let first_bounce_pipeline = first_bounce_per_point.then(|| build("gather_first_bounce", &lights));
+                    let first_bounce_pipeline =
+                        (split && first_bounce_per_point).then(|| build("gather_first_bounce", &lights));
                     let join = |t: std::thread::ScopedJoinHandle<'_, wgpu::ComputePipeline>| {
                         t.join().expect("an image estimate pipeline's build panicked")
                     };
                     (
                         join(direct_pipeline),
                         join(gather_pipeline),
-                        join(edges_pipeline),
+                        edges_pipeline.map(join),
                         first_bounce_pipeline.map(join),
                     )
                 });
@@ -263,7 +315,7 @@ impl ImageEstimate {
             width: camera.width,
             height: camera.height,
             pixel_stride: pixel_stride.max(1),
-            list_workgroups: list_workgroups.max(1),
+            passes,
         }
     }
 
@@ -322,22 +374,25 @@ impl ImageEstimate {
     /// `gather_edges` for those.)
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
         for band in &self.bands {
-            encoder.clear_buffer(&band.edges, 0, Some(4));
-            encoder.clear_buffer(&band.near_senders, 0, Some(4));
+            let split = match (self.passes, &self.edges_pipeline) {
+                (GatherPasses::Split { list_workgroups }, Some(edges)) => Some((list_workgroups.max(1), edges)),
+                _ => None,
+            };
+            if split.is_some() {
+                encoder.clear_buffer(&band.edges, 0, Some(4));
+                encoder.clear_buffer(&band.near_senders, 0, Some(4));
+            }
             // One invocation per block of stride x stride pixels that meets the band's rows.
             let stride = self.pixel_stride;
             let block_rows = (band.first_row + band.rows).div_ceil(stride) - band.first_row / stride;
             let groups = SPEC.grid("gather", [self.width.div_ceil(stride), block_rows]);
             let bind_groups = [&band.groups[1], &self.direct_group, &self.gather_group];
             kernel::dispatch(encoder, "firstshot.image_estimate.gather", &self.gather_pipeline, &bind_groups, groups);
-            let edges = (self.list_workgroups, 1);
-            kernel::dispatch(
-                encoder,
-                "firstshot.image_estimate.gather_edges",
-                &self.edges_pipeline,
-                &bind_groups,
-                edges,
-            );
+            let Some((list_workgroups, edges_pipeline)) = split else {
+                continue;
+            };
+            let edges = (list_workgroups, 1);
+            kernel::dispatch(encoder, "firstshot.image_estimate.gather_edges", edges_pipeline, &bind_groups, edges);
             if let Some(pipeline) = &self.first_bounce_pipeline {
                 kernel::dispatch(
                     encoder,
