@@ -294,6 +294,9 @@ pub struct RenderStats {
     pub bundle_resolution: u32,
     /// Bundles each step drew (`--bundles-per-step`), each at `bundle_resolution`.
     pub bundles_per_step: u32,
+    /// How the image's gather finished its pixels: "fused" (one pass) or "split"
+    /// (`--gather`, `image_estimate::fused_gather`).
+    pub gather: &'static str,
     /// Fragment capacity of a bundle step (grown if a step ever needed more).
     pub bundle_capacity: u32,
     /// Median wall time of a step, measured over batches of steps.
@@ -1201,6 +1204,7 @@ impl<'a> Renderer<'a> {
                 memory: crate::memory::MemoryPlan { peak_rss_bytes: crate::memory::peak_rss(), ..self.memory.clone() },
                 bundle_resolution: self.bundle_resolution,
                 bundles_per_step: self.per_step,
+                gather: self.views[0].estimate.passes().name(),
                 bundle_capacity: iteration_stats.capacity,
                 iteration_ms_median: iteration_stats.step_ms_median,
                 iteration_ms: iteration_stats.ms,

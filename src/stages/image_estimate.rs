@@ -138,6 +138,16 @@ pub enum GatherPasses {
     },
 }
 
+impl GatherPasses {
+    /// "fused" or "split", as `--gather` and the run's statistics name them.
+    pub fn name(self) -> &'static str {
+        match self {
+            GatherPasses::Fused => "fused",
+            GatherPasses::Split { .. } => "split",
+        }
+    }
+}
+
 /// Which of `GatherPasses` a run asks for (`--gather`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum GatherChoice {
@@ -354,6 +364,11 @@ impl ImageEstimate {
                 ("image_mean_radiance", crate::gpu::bindings::Resource::Pages(mean)),
             ],
         )
+    }
+
+    /// How the gather finishes its pixels (`fused_gather`).
+    pub fn passes(&self) -> GatherPasses {
+        self.passes
     }
 
     /// Binds the bundle buffers of a new iteration (after its fragment list grew).

@@ -13,7 +13,8 @@
 #   3. peers: time to 10/5/2 % error, firstshot on the GPU's Vulkan adapter against
 #      Mitsuba cuda_ad_rgb, one harness run per scene (partial results survive a timeout)
 #   4. throughput: stage timestamps, Sierpinski at bundle 512 and the Cornell box
-#   5. views: --all-cameras with four cameras against one camera, alternated
+#   5. views: --all-cameras with four cameras against one camera, alternated, the gather
+#      fused (the GPU's default) and split
 #   6. scaling: memory and time up to millions of patches and 8K images
 # FIRSTSHOT_GPU_STAGES="peers views" runs only those (by name or by prefix: peers_sierpinski).
 set -uo pipefail
@@ -111,25 +112,31 @@ stage throughput_sierpinski512 60 $harness throughput --adapters $vk --repeats 5
 stage throughput 60 $harness throughput --adapters $vk --repeats 5 --steps 200 \
     --scenes sierpinski,cornell_box,cornell_point --out "$work/throughput"
 
-# 5. Views: one camera against four, alternated, 256 x 256, same steps.
+# 5. Views: one camera against four, alternated, 256 x 256, same steps; each pair with the
+# gather as the adapter gets it (fused on a GPU) and split (`--gather split`), alternated too.
 views() {
     for scene in benches/scenes/sierpinski_4cameras.toml benches/scenes/cornell_box_4cameras.toml; do
         for steps in 200 1000; do
             for pair in 1 2 3; do
-                for mode in one all; do
-                    flag=""; [ $mode = all ] && flag=--all-cameras
-                    a=$(date +%s%N)
-                    $fs $scene $flag --adapter vulkan --iterations $steps --width 256 --height 256 \
-                        --out "$work/views_$mode" --quiet || return 1
-                    b=$(date +%s%N)
-                    echo "$(basename $scene .toml) steps $steps pair $pair $mode $(((b - a) / 1000000)) ms"
+                for gather in auto split; do
+                    for mode in one all; do
+                        flag=""; [ $mode = all ] && flag=--all-cameras
+                        a=$(date +%s%N)
+                        $fs $scene $flag --gather $gather --adapter vulkan --iterations $steps --width 256 \
+                            --height 256 --out "$work/views_$mode" --stats "$work/views_$mode.json" --quiet || return 1
+                        b=$(date +%s%N)
+                        step=$(grep -o '"iteration_ms_median": [0-9.]*' "$work/views_$mode.json" | cut -d' ' -f2)
+                        used=$(grep -o '"gather": "[a-z]*"' "$work/views_$mode.json" | cut -d'"' -f4)
+                        echo "$(basename $scene .toml) steps $steps pair $pair gather $used $mode" \
+                            "$(((b - a) / 1000000)) ms, median step $step ms"
+                    done
                 done
             done
         done
     done
 }
 export -f views; export fs work
-stage views 90 bash -c views
+stage views 150 bash -c views
 
 # 6. Scaling: GPU memory and step time from 22 k to millions of patches, images to 8K.
 # FIRSTSHOT_GPU_PATCH_SIZES / _IMAGES / _SCALING_LIMIT take it further (0.003: some 80 M patches).
