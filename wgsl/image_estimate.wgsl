@@ -80,10 +80,11 @@ override FIRST_BOUNCE_PER_POINT: bool = false;
 // True where `gather` finishes every pixel itself: the pixels it would list for
 // `gather_edges` (near their patch's edge) and for `gather_first_bounce` (a near sender) take
 // those passes' code inline, and the host records neither pass nor the lists' clears. A GPU
-// pays for each pass of a view's step (a dispatch, a barrier, the host's recording: about
-// a third of a small scene's view on an H200), while its diverging lanes cost little; a CPU
-// adapter runs both sides of every branch for each vector of 8 pixels, so there the split
-// passes stay (`image_estimate::fused_gather` chooses, docs/PERFORMANCE.md).
+// pays for each pass of a view's step (a dispatch, a barrier and the host's recording of
+// both), while the few lanes that take the inline code cost it little; a CPU adapter runs
+// both sides of every branch for each vector of 8 pixels, so there the split passes stay
+// (`image_estimate::fused_gather` chooses; docs/PERFORMANCE.md, "The gather in one pass on
+// a GPU").
 override FUSED_GATHER: bool = false;
 
 // False where no patch is a first-shot emitting shape whose light D and G share

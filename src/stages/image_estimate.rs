@@ -163,7 +163,8 @@ pub enum GatherChoice {
 /// one lane takes it, so there the few pixels near an edge or a near sender cost least in
 /// passes of their own (the split took a fifth off the Cornell box's gather, docs/
 /// PERFORMANCE.md). A GPU pays instead for each pass of every view's step: a dispatch, a
-/// barrier and the host's recording of both (docs/PERFORMANCE.md, "Views on the GPU").
+/// barrier and the host's recording of both (docs/PERFORMANCE.md, "The gather in one pass on
+/// a GPU").
 pub fn fused_gather(adapter: &crate::gpu::AdapterSummary, choice: GatherChoice) -> GatherPasses {
     let split = GatherPasses::Split { list_workgroups: list_workgroups(adapter) };
     match choice {
@@ -207,6 +208,9 @@ impl ImageEstimate {
         passes: GatherPasses,
         like: Option<&Self>,
     ) -> Self {
+        // The pipelines shared with `like` were built for its passes.
+        let passes = like.map_or(passes, |l| l.passes);
+        let split = matches!(passes, GatherPasses::Split { .. });
         let (built, direct_pipeline, gather_pipeline, edges_pipeline, first_bounce_pipeline) = match like {
             Some(like) => (
                 like.built.clone(),
@@ -234,7 +238,6 @@ impl ImageEstimate {
                     .concat(),
                     GatherPasses::Split { .. } => [&[("SEEN_IN_GATHER", 1.0)], per_point.as_slice()].concat(),
                 };
-                let split = matches!(passes, GatherPasses::Split { .. });
                 // Built side by side: a CPU adapter compiles each pipeline on the thread that
                 // asks for it (about 190 ms for the four on lavapipe, one after another).
                 let pipelines = std::thread::scope(|threads| {
@@ -275,9 +278,10 @@ impl ImageEstimate {
                 let bytes = camera.width as u64 * rows as u64 * IMAGE_SUM_BYTES_PER_PIXEL;
                 let sums = ["firstshot.image_estimate.direct_sum", "firstshot.image_estimate.gather_sum"]
                     .map(|label| buffers::storage_zeroed(device, label, bytes, wgpu::BufferUsages::COPY_SRC));
-                // A list of at most every pixel of the band, each listed once per bundle.
+                // A list of at most every pixel of the band, each listed once per bundle (a
+                // placeholder where the gather is fused and lists nothing).
                 let list = |label| {
-                    let bytes = 4 * (2 * camera.width as u64 * rows as u64 + 1);
+                    let bytes = if split { 4 * (2 * camera.width as u64 * rows as u64 + 1) } else { 16 };
                     buffers::storage_zeroed(device, label, bytes, wgpu::BufferUsages::empty())
                 };
                 let edges = list("firstshot.image_estimate.edges");
