@@ -147,7 +147,7 @@ fn test03_no_first_shot_with_a_point_light_is_a_usage_error() {
 }
 
 /// The stats keys of CLI.md.
-const STATS_KEYS: [&str; 15] = [
+const STATS_KEYS: [&str; 16] = [
     "adapter",
     "patches",
     "memory",
@@ -156,6 +156,7 @@ const STATS_KEYS: [&str; 15] = [
     "hemicube_resolution",
     "bundle_resolution",
     "bundles_per_step",
+    "gather",
     "first_shot",
     "first_shot_ms",
     "iterations",
@@ -214,6 +215,9 @@ fn test04_tiny_render_writes_exr_png_and_stats() {
     }
     assert_eq!(json["image"], serde_json::json!([32, 32]));
     assert_eq!(json["hemicube_resolution"], 64);
+    // --gather auto: the split passes on a CPU adapter, one fused pass on a GPU.
+    let cpu = json["adapter"]["device_type"] == "Cpu";
+    assert_eq!(json["gather"], if cpu { "split" } else { "fused" }, "{text}");
     // From the scene's [settings]: seed 1; 2 x 2 light cells give 9 samples. No
     // bundle_resolution there, so the automatic one: for the 40 mm patches (median area
     // about 378 mm^2) in a bounding sphere of radius 480 mm, 2 x 480 x sqrt(2 / 378) = 70,
