@@ -171,7 +171,7 @@ pub fn run(
     // else grow on overflow below.
     let mut capacity = crate::memory::initial_pair_capacity(&limits, buffers.page_bytes, n, samples) as u32;
     let near = buffers.radius * 1e-6;
-    let item_buffer = CameraItemBuffer::new(device, resolution, resolution, None);
+    let item_buffer = CameraItemBuffer::new(device, resolution, resolution, 1, None);
     loop {
         let reduce = FirstShotReduce::new(device, buffers, &item_buffer, capacity);
         let mut face_count = 0;

@@ -194,7 +194,10 @@ pub struct GpuCamera {
     /// in tangent units (0 for a camera; off-centre for the faces of a cubic tetrahedron).
     pub jitter: [f32; 4],
     /// x: width, y: height in pixels; z: `VIEW_ORTHOGRAPHIC` for a parallel projection (then
-    /// `right.w` and `up.w` are the half extents of the view in scene units), else 0.
+    /// `right.w` and `up.w` are the half extents of the view in scene units), else 0; w: for a
+    /// camera whose item buffer is supersampled (`camera_item_buffer::camera_supersample`),
+    /// its texels per pixel side S in bits 0-7 and the texel of this step's sample inside a
+    /// pixel's S x S in bits 8-15 (x) and 16-23 (y) (`camera_texel` in WGSL); else 0.
     pub size: [u32; 4],
 }
 

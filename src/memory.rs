@@ -33,8 +33,9 @@ const BYTES_PER_LINE: u64 = 16 + 8 * crate::layout::LINE_BUCKET as u64;
 /// in a long line's slice (depth bits, patch: 8) and in the list of long lines (4).
 const BYTES_PER_FRAGMENT: u64 = 28;
 /// GPU bytes per pixel of a view: the image sum (two halves of vec4<f32>) and its copy kept
-/// to redo a batch, the camera item buffer (patch id and depth, 4 bytes each) and the
-/// gather's lists of edge pixels and of senders' first bounces (8 each).
+/// to redo a batch, the camera item buffer (patch id and depth, 4 bytes each; a supersampled
+/// one's other texels are counted apart, `supersampled_camera_bytes`) and the gather's lists
+/// of edge pixels and of senders' first bounces (8 each).
 const DEVICE_BYTES_PER_PIXEL: u64 = 2 * 32 + 8 + 8 + 8;
 /// Host bytes per pixel of a view: the image sum read back (32) and the image (rgba f32).
 const HOST_BYTES_PER_PIXEL: u64 = 32 + 16;
@@ -136,6 +137,15 @@ pub fn predict(
     let host_bytes_per_patch =
         (size_of::<crate::scene::Patch>() + size_of::<crate::scene::Piece>()) as u64 + UPLOAD_BYTES_PER_PATCH;
     let pixels: u64 = options.views(scene).iter().map(|v| v.camera.width as u64 * v.camera.height as u64).sum();
+    // A supersampled camera item buffer's texels past one a pixel (id and depth, 8 bytes).
+    let supersampled_camera_bytes: u64 = options
+        .views(scene)
+        .iter()
+        .map(|v| {
+            let s = crate::stages::camera_item_buffer::camera_supersample(v.camera.width, v.camera.height) as u64;
+            v.camera.width as u64 * v.camera.height as u64 * (s * s - 1) * 8
+        })
+        .sum();
     let (lines, fragments) = match options.iterations {
         0 => (0, 0),
         _ => {
@@ -173,6 +183,7 @@ pub fn predict(
         crate::direct_light::SHADOW_TEXEL_BUDGET.min(face * (6 * scene.lights.len() as u64 + 10 * suns));
     let device_bytes = n * (device_bytes_per_patch + FIRST_SHOT_BYTES_PER_PATCH)
         + pixels * DEVICE_BYTES_PER_PIXEL
+        + supersampled_camera_bytes
         + lines * BYTES_PER_LINE
         + fragments * BYTES_PER_FRAGMENT
         + first_shot_pairs * BYTES_PER_PAIR

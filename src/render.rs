@@ -697,6 +697,12 @@ pub struct ViewImage {
     pub camera: Camera,
     item_buffer: CameraItemBuffer,
     estimate: ImageEstimate,
+    /// The offset inside the strata of the sample its supersampled item buffer holds (the
+    /// bits of `PixelSample::offset`), or `None` where it holds none that can be trusted (a
+    /// new camera, a restored or redone batch).
+    rastered: Option<[u64; 2]>,
+    /// Whether this step renders the view's camera item buffer (`write_camera`).
+    raster_due: bool,
 }
 
 /// One render, set up: the scene on the GPU, its first-shot table, the iteration state and
@@ -817,7 +823,9 @@ impl<'a> Renderer<'a> {
         let mut views: Vec<ViewImage> = Vec::new();
         for NamedCamera { name, camera } in options.views(scene) {
             let like = views.first();
-            let item_buffer = CameraItemBuffer::new(device, camera.width, camera.height, like.map(|v| &v.item_buffer));
+            let supersample = crate::stages::camera_item_buffer::camera_supersample(camera.width, camera.height);
+            let item_buffer =
+                CameraItemBuffer::new(device, camera.width, camera.height, supersample, like.map(|v| &v.item_buffer));
             let band_rows = options
                 .image_band_rows
                 .unwrap_or_else(|| crate::stages::image_estimate::band_rows(&device.limits(), camera.width));
@@ -834,7 +842,7 @@ impl<'a> Renderer<'a> {
                 like.map(|v| &v.estimate),
             );
             estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);
-            views.push(ViewImage { name, camera, item_buffer, estimate });
+            views.push(ViewImage { name, camera, item_buffer, estimate, rastered: None, raster_due: true });
         }
         Ok(Renderer {
             ctx,
@@ -922,9 +930,11 @@ impl<'a> Renderer<'a> {
         );
         if image_step {
             let i = k - self.image_start;
-            let u = [rng.uniform(), rng.uniform()];
-            let jitter = crate::rng::stratified_pixel_sample(self.options.seed, i as u64, u);
-            self.write_camera([jitter[0] as f32, jitter[1] as f32]);
+            // Two draws the step's generator once gave the camera sample: kept, so that what
+            // it draws next (the points on the lights) stays as it was.
+            let _ = [rng.uniform(), rng.uniform()];
+            let sample = crate::rng::stratified_pixel_sample(self.options.seed, i as u64);
+            self.write_camera(sample.position());
             self.direct_due = self.direct_schedule.due(i);
             // The area lights' windows of the step's pass: new points on a step that estimates
             // the direct light; on the others, the last such step's, which the near senders'
@@ -938,13 +948,47 @@ impl<'a> Renderer<'a> {
         }
     }
 
-    /// Every view's camera uniform, with the sample at `jitter` inside each pixel: the views
-    /// share the step's sample, so each view's image is that of a run with its camera alone.
-    fn write_camera(&self, jitter: [f32; 2]) {
-        for view in &self.views {
-            let c = &view.camera;
-            let cam = gpu_camera(c, c.width, c.height, self.near, jitter);
-            self.ctx.queue.write_buffer(&view.item_buffer.camera, 0, bytemuck::bytes_of(&cam));
+    /// Every view's camera uniform, with the sample at `position` inside each pixel (x right,
+    /// y down, in [0, 1)): the views share the step's sample, so each view's image is that of
+    /// a run with its camera alone. And whether each view's item buffer is rendered this step
+    /// (`ViewImage::raster_due`): at every sample where it holds one texel a pixel; where it
+    /// holds S x S (`camera_supersample`), only where the sample's offset inside its S x S
+    /// texels differs from the raster's, so that one raster serves the steps of a block of
+    /// camera samples (`rng::stratified_pixel_sample`), and a direct-light image's passes, each
+    /// at its own offset, render one each.
+    fn write_camera(&mut self, position: [f64; 2]) {
+        let queue = &self.ctx.queue;
+        for view in &mut self.views {
+            let c = view.camera;
+            let s = view.item_buffer.supersample;
+            let mut cam = gpu_camera(&c, c.width, c.height, self.near, [position[0] as f32, position[1] as f32]);
+            if s == 1 {
+                view.raster_due = true;
+            } else {
+                // The texel of the pixel's S x S that holds the sample, and the sample's offset
+                // from that texel's corner, in texels (exact: S is a power of two).
+                let scaled = position.map(|p| p * s as f64);
+                let cell = scaled.map(|v| (v.floor() as u32).min(s - 1));
+                let offset = [scaled[0] - cell[0] as f64, scaled[1] - cell[1] as f64];
+                cam.size[3] = s | cell[0] << 8 | cell[1] << 16;
+                let key = offset.map(f64::to_bits);
+                view.raster_due = view.rastered != Some(key);
+                if view.raster_due {
+                    let raster = gpu_camera(&c, c.width * s, c.height * s, self.near, offset.map(|v| v as f32));
+                    let buffer = view.item_buffer.raster_camera.as_ref().expect("a supersampled view's raster camera");
+                    queue.write_buffer(buffer, 0, bytemuck::bytes_of(&raster));
+                    view.rastered = Some(key);
+                }
+            }
+            queue.write_buffer(&view.item_buffer.camera, 0, bytemuck::bytes_of(&cam));
+        }
+    }
+
+    /// Forgets what every view's item buffer holds, so that the next step renders it: after a
+    /// new camera, a restored checkpoint or a redone batch.
+    fn forget_rasters(&mut self) {
+        for view in &mut self.views {
+            view.rastered = None;
         }
     }
 
@@ -960,6 +1004,7 @@ impl<'a> Renderer<'a> {
     pub fn restart_image(&mut self, camera: Camera, step: u32) {
         let view = &mut self.views[0];
         view.camera = Camera { width: view.camera.width, height: view.camera.height, ..camera };
+        self.forget_rasters();
         self.clear_images();
         self.image_start = step.max(self.burn_in);
     }
@@ -1020,7 +1065,10 @@ impl<'a> Renderer<'a> {
         let mut stages: Vec<Stage<'_>> = Vec::new();
         for (v, view) in self.views.iter().enumerate() {
             let (camera, estimate) = (&view.item_buffer, &view.estimate);
-            stages.push(("camera", Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.raster))));
+            if view.raster_due {
+                stages
+                    .push(("camera", Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.raster))));
+            }
             if (direct || windows_due) && v == 0 {
                 stages.push((
                     "light_windows",
@@ -1058,7 +1106,10 @@ impl<'a> Renderer<'a> {
 
     /// Step `k` stage by stage, each submitted and timed on its own (`gpu::profile`); it
     /// leaves the same state as `submit_step`.
+    /// Every view's camera item buffer is rendered in it, also where a supersampled one would
+    /// have served this step from an earlier raster, so that the profile shows its cost.
     pub fn profile_step(&mut self, k: u32, timer: &StageTimer, before: Vec<Stage<'_>>) -> Result<Vec<StageTime>> {
+        self.forget_rasters();
         self.write_step(k);
         let mut stages = before;
         stages.extend(self.step_stages(k));
@@ -1260,7 +1311,7 @@ impl<'a> Renderer<'a> {
                 ((cell % per_axis) as f64 + rng.uniform()) / per_axis as f64,
                 ((cell / per_axis) as f64 + rng.uniform()) / per_axis as f64,
             ];
-            self.write_camera([jitter[0] as f32, jitter[1] as f32]);
+            self.write_camera(jitter);
             self.windows_due = self.direct.prepare_pass(queue, k as u64);
             self.submit(&self.image_stages(true, false), "firstshot.render.direct_image");
             done.passes = k + 1;
@@ -1386,6 +1437,7 @@ impl<'a> Renderer<'a> {
                 // A line held more surfaces than the list had room for: restore the batch's
                 // start and redo it with twice the room.
                 copy_all(false);
+                self.forget_rasters();
                 self.regrow()?;
                 interrupted = false;
                 continue;

@@ -78,20 +78,41 @@ pub const PIXEL_STRATA: u64 = 4;
 /// directions' blocks.
 const PIXEL_STREAM: u64 = u64::MAX / 2;
 
-/// The camera's sample inside every pixel (x right, y down, in [0, 1)) at image step
-/// `image_step`, from the step's uniforms `u`: uniform over the pixel, and stratified over
-/// blocks of PIXEL_STRATA^2 image steps, which visit the strata of a PIXEL_STRATA x
-/// PIXEL_STRATA grid once each in the block's random order, with `u` placing the sample
-/// within its stratum. Along a geometric edge a pixel's value then converges as a
+/// The camera's sample inside every pixel at one image step (`stratified_pixel_sample`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelSample {
+    /// The stratum of the PIXEL_STRATA x PIXEL_STRATA grid (x right, y down).
+    pub cell: [u32; 2],
+    /// The offset inside the stratum, in strata, each in [0, 1): the same for every step of
+    /// a block.
+    pub offset: [f64; 2],
+}
+
+impl PixelSample {
+    /// The sample's position inside the pixel (x right, y down), each in [0, 1).
+    pub fn position(&self) -> [f64; 2] {
+        let n = PIXEL_STRATA as f64;
+        [(self.cell[0] as f64 + self.offset[0]) / n, (self.cell[1] as f64 + self.offset[1]) / n]
+    }
+}
+
+/// The camera's sample inside every pixel at image step `image_step`: uniform over the
+/// pixel, and stratified over blocks of PIXEL_STRATA^2 image steps, which visit the strata
+/// of a PIXEL_STRATA x PIXEL_STRATA grid once each in the block's random order, every step
+/// of a block at the same uniform offset inside its stratum (a randomly shifted grid,
+/// Cranley-Patterson). Along a geometric edge a pixel's value then converges as a
 /// stratified mean (the share of the pixel each side covers) instead of a random one; the
 /// random order keeps the samples independent of the other stratified sequences (the
-/// bundle directions, the area lights' points), so that no pairing of them repeats.
-pub fn stratified_pixel_sample(seed: u64, image_step: u64, u: [f64; 2]) -> [f64; 2] {
+/// bundle directions, the area lights' points), so that no pairing of them repeats. The
+/// shared offset lets one camera raster at PIXEL_STRATA times the resolution serve a whole
+/// block (`camera_item_buffer::camera_supersample`); each sample is still uniform over the
+/// pixel, since the offset is.
+pub fn stratified_pixel_sample(seed: u64, image_step: u64) -> PixelSample {
     let cells = PIXEL_STRATA * PIXEL_STRATA;
     let mut rng = StepRng::new(seed, PIXEL_STREAM - image_step / cells);
     let cell = shuffled(&mut rng, cells, image_step % cells);
-    let n = PIXEL_STRATA as f64;
-    [((cell % PIXEL_STRATA) as f64 + u[0]) / n, ((cell / PIXEL_STRATA) as f64 + u[1]) / n]
+    let offset = [rng.uniform(), rng.uniform()];
+    PixelSample { cell: [(cell % PIXEL_STRATA) as u32, (cell / PIXEL_STRATA) as u32], offset }
 }
 
 #[cfg(test)]
@@ -128,34 +149,34 @@ mod tests {
         let blocks = 64;
         for block in 0..blocks {
             let mut seen = vec![0; cells as usize];
+            let first = stratified_pixel_sample(3, block * cells);
             for i in 0..cells {
                 let step = block * cells + i;
-                let mut r = StepRng::new(3, step);
-                let p = stratified_pixel_sample(3, step, [r.uniform(), r.uniform()]);
+                let sample = stratified_pixel_sample(3, step);
+                let p = sample.position();
                 assert!(p.iter().all(|&c| (0.0..1.0).contains(&c)), "{p:?}");
+                // One offset inside the strata for the whole block.
+                assert_eq!(sample.offset, first.offset, "block {block}, step {step}");
                 let n = PIXEL_STRATA as f64;
-                seen[((p[1] * n) as u64 * PIXEL_STRATA + (p[0] * n) as u64) as usize] += 1;
+                assert_eq!([(p[0] * n) as u32, (p[1] * n) as u32], sample.cell);
+                seen[(sample.cell[1] as u64 * PIXEL_STRATA + sample.cell[0] as u64) as usize] += 1;
                 sum[0] += p[0];
                 sum[1] += p[1];
             }
             assert!(seen.iter().all(|&c| c == 1), "block {block}: {seen:?}");
         }
-        // Uniform: the mean of 1024 stratified points is 1/2 within a few 1e-3.
+        // Uniform: the mean of 1024 stratified points (64 offsets) is 1/2 within about
+        // 0.29 / (4 sqrt(64)) = 0.009 (the offsets' spread over the strata); 0.03 is three of them.
         let n = (blocks * cells) as f64;
-        assert!((sum[0] / n - 0.5).abs() < 0.005 && (sum[1] / n - 0.5).abs() < 0.005, "{sum:?}");
-        // The order differs from block to block and from seed to seed.
-        let first = |seed: u64, block: u64| -> Vec<u64> {
-            (0..cells)
-                .map(|i| {
-                    let p = stratified_pixel_sample(seed, block * cells + i, [0.5, 0.5]);
-                    (p[1] * 4.0) as u64 * 4 + (p[0] * 4.0) as u64
-                })
-                .collect()
+        assert!((sum[0] / n - 0.5).abs() < 0.03 && (sum[1] / n - 0.5).abs() < 0.03, "{sum:?}");
+        // The order and the offset differ from block to block and from seed to seed.
+        let first = |seed: u64, block: u64| -> Vec<[u32; 2]> {
+            (0..cells).map(|i| stratified_pixel_sample(seed, block * cells + i).cell).collect()
         };
         assert_ne!(first(3, 0), first(3, 1));
         assert_ne!(first(3, 0), first(4, 0));
+        assert_ne!(stratified_pixel_sample(3, 0).offset, stratified_pixel_sample(3, cells).offset);
     }
-
     #[test]
     fn same_seed_and_step_give_the_same_stream() {
         let a: Vec<f64> = (0..8)

@@ -805,7 +805,7 @@ struct Seen {
 }
 
 fn seen(pixel: vec2<u32>) -> Seen {
-    let id = textureLoad(item_buffer, vec2<i32>(pixel), 0).x;
+    let id = textureLoad(item_buffer, camera_texel(camera, pixel), 0).x;
     var out = Seen(SEEN_NOTHING, 0u, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     if (id == NO_PATCH || id > params.patch_count) {
         return out;

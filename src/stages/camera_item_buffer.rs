@@ -15,6 +15,30 @@ pub const SPEC: KernelSpec = KernelSpec {
     groups: &[&[uniform::<GpuCamera>("camera")]],
 };
 
+/// Side of a camera pixel's block of item-buffer texels when the view is small enough
+/// (`camera_supersample`): the camera's sample strata (`rng::PIXEL_STRATA`), so that one
+/// raster holds every stratum of a block of image steps.
+pub const CAMERA_SUPERSAMPLE: u32 = crate::rng::PIXEL_STRATA as u32;
+/// The most texels a supersampled camera item buffer may take (id and depth, 8 bytes each:
+/// 32 MiB, a 512 x 512 view).
+pub const SUPERSAMPLED_TEXELS: u64 = 1 << 22;
+/// The largest texture side every adapter wgpu opens by default allows.
+const MAX_TEXTURE_SIDE: u32 = 8192;
+
+/// Texels per pixel side of a view's camera item buffer: `CAMERA_SUPERSAMPLE` where the
+/// view's texels stay within `SUPERSAMPLED_TEXELS` and the texture's sides within what every
+/// adapter allows, else 1. Why: a camera raster costs about the same at any size on a CPU
+/// adapter (it sets up every triangle on one thread: the Sierpinski scene's 16 404 triangles
+/// about 6 ms at 256 x 256 and at 512 x 512), and each image step asked for a new one at its
+/// sample point. Supersampled, one raster serves the `CAMERA_SUPERSAMPLE`^2 image steps of a
+/// block of camera samples, which share their offset inside the strata
+/// (`rng::stratified_pixel_sample`): each step reads its stratum's texel of every pixel.
+pub fn camera_supersample(width: u32, height: u32) -> u32 {
+    let s = CAMERA_SUPERSAMPLE;
+    let texels = width as u64 * height as u64 * (s * s) as u64;
+    if texels <= SUPERSAMPLED_TEXELS && width.max(height) * s <= MAX_TEXTURE_SIDE { s } else { 1 }
+}
+
 pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
@@ -80,18 +104,27 @@ pub struct CameraItemBuffer {
     kernel: Kernel,
     pipeline: wgpu::RenderPipeline,
     bind_group: wgpu::BindGroup,
+    /// The camera the pixels' estimates read (`width` x `height`, this step's sample); with
+    /// `supersample` 1 the raster's too.
     pub camera: wgpu::Buffer,
+    /// With `supersample` > 1: the raster's camera, at `supersample` times the size, its
+    /// texel centres shifted by the block's offset inside the strata.
+    pub raster_camera: Option<wgpu::Buffer>,
     pub ids: wgpu::Texture,
     pub ids_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     pub width: u32,
     pub height: u32,
+    /// Texels per pixel side (`camera_supersample`; 1 for a light's faces).
+    pub supersample: u32,
 }
 
 impl CameraItemBuffer {
+    /// `supersample`: texels per pixel side (`camera_supersample`, or 1).
     /// `like`: an item buffer whose kernel and pipeline this one shares (another view of
     /// the same render: only the camera uniform, the textures and the bind group are new).
-    pub fn new(device: &wgpu::Device, width: u32, height: u32, like: Option<&Self>) -> Self {
+    pub fn new(device: &wgpu::Device, width: u32, height: u32, supersample: u32, like: Option<&Self>) -> Self {
+        let supersample = supersample.max(1);
         let (built, pipeline) = match like {
             Some(like) => (like.kernel.clone(), like.pipeline.clone()),
             None => {
@@ -105,8 +138,16 @@ impl CameraItemBuffer {
             "firstshot.camera_item_buffer.camera",
             &<GpuCamera as bytemuck::Zeroable>::zeroed(),
         );
-        let bind_group = built.bind_group(device, 0, &[("camera", (&camera).into())]);
-        let size = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
+        let raster_camera = (supersample > 1).then(|| {
+            buffers::uniform(
+                device,
+                "firstshot.camera_item_buffer.raster_camera",
+                &<GpuCamera as bytemuck::Zeroable>::zeroed(),
+            )
+        });
+        let bind_group = built.bind_group(device, 0, &[("camera", raster_camera.as_ref().unwrap_or(&camera).into())]);
+        let size =
+            wgpu::Extent3d { width: width * supersample, height: height * supersample, depth_or_array_layers: 1 };
         let ids = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("firstshot.camera_item_buffer.ids"),
             size,
@@ -134,11 +175,13 @@ impl CameraItemBuffer {
             pipeline,
             bind_group,
             camera,
+            raster_camera,
             ids_view: ids.create_view(&Default::default()),
             ids,
             depth_view: depth.create_view(&Default::default()),
             width,
             height,
+            supersample,
         }
     }
 
@@ -151,7 +194,8 @@ impl CameraItemBuffer {
     pub fn record_rows(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh, rows: u32) {
         let mut pass = begin_item_pass(encoder, "firstshot.camera_item_buffer.pass", &self.ids_view, &self.depth_view);
         pass.set_pipeline(&self.pipeline);
-        pass.set_scissor_rect(0, 0, self.width, rows.clamp(1, self.height));
+        let s = self.supersample;
+        pass.set_scissor_rect(0, 0, self.width * s, rows.clamp(1, self.height) * s);
         pass.set_bind_group(0, &self.bind_group, &[]);
         raster.draw(&mut pass, 0..1);
     }
