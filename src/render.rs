@@ -151,6 +151,10 @@ pub struct RenderOptions {
     /// Whether the gather finishes every pixel in one pass or lists some for passes of their
     /// own (`image_estimate::fused_gather`: by the adapter unless asked; the same image).
     pub gather: crate::stages::image_estimate::GatherChoice,
+    /// Texels per pixel side of the views' camera item buffers, 1 or `CAMERA_SUPERSAMPLE`;
+    /// `None`: by each view's size (`camera_item_buffer::camera_supersample`). Set only by
+    /// tests, to check that the supersampled buffer changes nothing but the rasters' count.
+    pub camera_supersample: Option<u32>,
 }
 
 impl RenderOptions {
@@ -178,6 +182,7 @@ impl RenderOptions {
             bundles_per_step: scene.settings.bundles_per_step,
             patch_first_bounce: false,
             gather: Default::default(),
+            camera_supersample: None,
         }
     }
 
@@ -823,7 +828,9 @@ impl<'a> Renderer<'a> {
         let mut views: Vec<ViewImage> = Vec::new();
         for NamedCamera { name, camera } in options.views(scene) {
             let like = views.first();
-            let supersample = crate::stages::camera_item_buffer::camera_supersample(camera.width, camera.height);
+            let supersample = options
+                .camera_supersample
+                .unwrap_or_else(|| crate::stages::camera_item_buffer::camera_supersample(camera.width, camera.height));
             let item_buffer =
                 CameraItemBuffer::new(device, camera.width, camera.height, supersample, like.map(|v| &v.item_buffer));
             let band_rows = options
