@@ -142,9 +142,7 @@ pub fn predict(
         .views(scene)
         .iter()
         .map(|v| {
-            let s = options.camera_supersample.unwrap_or_else(|| {
-                crate::stages::camera_item_buffer::camera_supersample(v.camera.width, v.camera.height)
-            }) as u64;
+            let s = options.camera_supersample_for(&v.camera) as u64;
             v.camera.width as u64 * v.camera.height as u64 * (s * s - 1) * 8
         })
         .sum();

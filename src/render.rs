@@ -186,6 +186,13 @@ impl RenderOptions {
         }
     }
 
+    /// Texels per pixel side of the camera item buffer of a view of `camera`'s size: the one
+    /// asked for, else the automatic choice (`camera_item_buffer::camera_supersample`).
+    pub fn camera_supersample_for(&self, camera: &Camera) -> u32 {
+        self.camera_supersample
+            .unwrap_or_else(|| crate::stages::camera_item_buffer::camera_supersample(camera.width, camera.height))
+    }
+
     /// The first shot's hemicube resolution for `patches`: the one asked for, else the
     /// automatic choice (`first_shot::auto_resolution`).
     pub fn hemicube_resolution_for(&self, patches: &Patches) -> u32 {
@@ -828,9 +835,7 @@ impl<'a> Renderer<'a> {
         let mut views: Vec<ViewImage> = Vec::new();
         for NamedCamera { name, camera } in options.views(scene) {
             let like = views.first();
-            let supersample = options
-                .camera_supersample
-                .unwrap_or_else(|| crate::stages::camera_item_buffer::camera_supersample(camera.width, camera.height));
+            let supersample = options.camera_supersample_for(&camera);
             let item_buffer =
                 CameraItemBuffer::new(device, camera.width, camera.height, supersample, like.map(|v| &v.item_buffer));
             let band_rows = options

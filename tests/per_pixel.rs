@@ -908,6 +908,15 @@ fn test16_a_closed_room_does_not_see_the_sky_outside_it() {
     assert!(leak < 0.006 * mean, "the sky leaks {leak:.5} into a room of mean {mean:.5}");
 }
 
+/// The largest difference of a channel of `a` from `b`'s, relative to `b`'s (at least 1e-3).
+fn largest_relative_difference(a: &Image, b: &Image) -> f32 {
+    a.pixels
+        .iter()
+        .zip(&b.pixels)
+        .flat_map(|(p, q)| (0..3).map(move |c| (p[c] - q[c]).abs() / q[c].abs().max(1e-3)))
+        .fold(0.0, f32::max)
+}
+
 #[test]
 fn test17_kernels_built_without_the_glossy_code_render_a_diffuse_scene_as_with_it() {
     // A scene without glossy materials gets kernels with the glossy code compiled out
@@ -943,12 +952,7 @@ fn test17_kernels_built_without_the_glossy_code_render_a_diffuse_scene_as_with_i
         assert_eq!(glossy_constant(&lobed), Some(1.0), "{name}: built with the glossy code");
         let plain = render(&ctx, &diffuse, &patches, &options).unwrap().image;
         let with_lobe = render(&ctx, &lobed, &patches, &options).unwrap().image;
-        let mut worst = 0f32;
-        for (a, b) in plain.pixels.iter().zip(&with_lobe.pixels) {
-            for c in 0..3 {
-                worst = worst.max((a[c] - b[c]).abs() / b[c].abs().max(1e-3));
-            }
-        }
+        let worst = largest_relative_difference(&plain, &with_lobe);
         eprintln!("{name}: largest relative difference {worst:e}");
         assert!(plain.mean()[0] > 0.01, "{name}: the image is lit");
         assert!(worst < 1e-5, "{name}: the two builds differ by {worst:e}");
@@ -1001,18 +1005,13 @@ fn test19_the_fused_gather_renders_the_split_gathers_image() {
         (options.width, options.height, options.iterations, options.burn_in) = (40, 40, 6, Some(2));
         options.image_band_rows = bands;
         let patches = scene::tessellate(&scene, options.patch_size).unwrap();
-        let mut images = [GatherChoice::Split, GatherChoice::Fused].map(|gather| {
+        let images = [GatherChoice::Split, GatherChoice::Fused].map(|gather| {
             let options = RenderOptions { gather, ..options.clone() };
             render(&ctx, &scene, &patches, &options).unwrap().image
         });
-        let [split, fused] = &mut images;
-        let (mut worst, mut differ) = (0f32, 0usize);
-        for (a, b) in fused.pixels.iter().zip(&split.pixels) {
-            differ += (a != b) as usize;
-            for c in 0..3 {
-                worst = worst.max((a[c] - b[c]).abs() / b[c].abs().max(1e-3));
-            }
-        }
+        let [split, fused] = &images;
+        let worst = largest_relative_difference(fused, split);
+        let differ = fused.pixels.iter().zip(&split.pixels).filter(|(a, b)| a != b).count();
         eprintln!("{name}: largest relative difference {worst:e}, {differ} pixels not equal to the bit");
         assert!(split.mean()[0] > 0.01, "{name}: the image is lit");
         assert!(worst < 1e-5, "{name}: the fused gather differs from the split one by {worst:e}");

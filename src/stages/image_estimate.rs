@@ -392,11 +392,11 @@ impl ImageEstimate {
     /// (Two passes a band: `gather`, which lists the pixels near their patch's edge, then
     /// `gather_edges` for those.)
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
+        let split = match (self.passes, &self.edges_pipeline) {
+            (GatherPasses::Split { list_workgroups }, Some(edges)) => Some((list_workgroups.max(1), edges)),
+            _ => None,
+        };
         for band in &self.bands {
-            let split = match (self.passes, &self.edges_pipeline) {
-                (GatherPasses::Split { list_workgroups }, Some(edges)) => Some((list_workgroups.max(1), edges)),
-                _ => None,
-            };
             if split.is_some() {
                 encoder.clear_buffer(&band.edges, 0, Some(4));
                 encoder.clear_buffer(&band.near_senders, 0, Some(4));
