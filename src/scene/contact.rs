@@ -31,7 +31,7 @@ const CONTACT_TOLERANCE: f64 = 1e-7;
 const PARALLEL_GAP: f64 = 1e-3;
 
 /// Normals whose dot product reaches this count as parallel (within 0.08 degrees).
-const PARALLEL_COS: f64 = 1.0 - 1e-6;
+pub(super) const PARALLEL_COS: f64 = 1.0 - 1e-6;
 
 /// The most cut lines one triangle takes; beyond it the remaining contacts are left uncut
 /// (a bias of the kind described above, no error): keeps a triangle under a dense mesh from
@@ -60,8 +60,27 @@ struct Entry {
     hi: DVec3,
 }
 
+/// What the contacts do to the surface triangles.
+#[derive(Debug, Default)]
+pub struct Contacts {
+    /// The triangles that contact lines cut.
+    pub pieces: Pieces,
+    /// For each surface triangle along one of whose edges a contact runs (a wall standing on
+    /// that edge, a light or another shape's triangle lying against it), which edges: edge i
+    /// from vertex i to vertex i + 1. Such an edge cuts nothing, but two triangles that share
+    /// it are not one surface for the gather (`tessellate`'s pieces), as a polygon of the
+    /// cuts is.
+    pub touched_edges: HashMap<(usize, usize), [bool; 3]>,
+}
+
 /// Every surface triangle that another surface touches or crosses, cut along those lines.
 pub fn contact_pieces(scene: &Scene) -> Pieces {
+    contacts(scene).pieces
+}
+
+/// Every surface triangle that another surface touches or crosses, cut along those lines,
+/// and the triangles' edges that contacts run along.
+pub fn contacts(scene: &Scene) -> Contacts {
     let mut entries: Vec<Entry> = Vec::new();
     for (s, surface) in scene.surfaces.iter().enumerate() {
         let triangles: Vec<[DVec3; 3]> = surface.triangles.iter().map(|t| t.vertices).collect();
@@ -75,7 +94,7 @@ pub fn contact_pieces(scene: &Scene) -> Pieces {
         }
     }
     if entries.len() < 2 {
-        return Pieces::new();
+        return Contacts::default();
     }
     let lo = entries.iter().fold(DVec3::splat(f64::INFINITY), |a, e| a.min(e.lo));
     let hi = entries.iter().fold(DVec3::splat(f64::NEG_INFINITY), |a, e| a.max(e.hi));
@@ -89,25 +108,49 @@ pub fn contact_pieces(scene: &Scene) -> Pieces {
     for_each_close_pair(&entries, gap, |i, j| pairs.push((i, j)));
     pairs.sort_unstable();
     let mut lines: Vec<Vec<Line>> = (0..entries.len()).map(|_| Vec::new()).collect();
+    let mut touched = vec![[false; 3]; entries.len()];
     for (i, j) in pairs {
         for (a, b) in [(i, j), (j, i)] {
             if entries[a].id.is_some() {
-                cut_lines(&entries[a].vertices, &entries[b], tolerance, gap, &mut lines[a]);
+                cut_lines(&entries[a].vertices, &entries[b], tolerance, gap, &mut lines[a], &mut touched[a]);
             }
         }
     }
 
-    let mut pieces = Pieces::new();
-    for (e, cuts) in entries.iter().zip(&lines) {
+    let mut out = Contacts::default();
+    for ((e, cuts), touched) in entries.iter().zip(&lines).zip(touched) {
+        let Some(id) = e.id else {
+            continue;
+        };
+        if touched.contains(&true) {
+            out.touched_edges.insert(id, touched);
+        }
         if cuts.is_empty() {
             continue;
         }
         let split = split_triangle(&e.vertices, cuts, tolerance);
-        if let (Some(id), true) = (e.id, split.iter().map(Vec::len).sum::<usize>() > 1) {
-            pieces.insert(id, split);
+        if split.iter().map(Vec::len).sum::<usize>() > 1 {
+            out.pieces.insert(id, split);
         }
     }
-    pieces
+    out
+}
+
+/// Which edges of triangle `t` (edge i from vertex i to vertex i + 1, `corners` in t's
+/// frame) the contact segment a-b runs along for more than the tolerance.
+fn touched_edges(corners: &[DVec2; 3], a: DVec2, b: DVec2, tolerance: f64) -> [bool; 3] {
+    std::array::from_fn(|i| {
+        let (p, q) = (corners[i], corners[(i + 1) % 3]);
+        let length = p.distance(q);
+        let along = (q - p) / length;
+        let off = |x: DVec2| along.perp_dot(x - p).abs();
+        if off(a) > tolerance || off(b) > tolerance {
+            return false;
+        }
+        // The overlap of a-b with the edge, measured along it.
+        let (sa, sb) = ((a - p).dot(along), (b - p).dot(along));
+        sa.max(sb).min(length) - sa.min(sb).max(0.0) > tolerance
+    })
 }
 
 /// Calls `visit(i, j)` once for every pair i < j of entries whose boxes overlap (within the
@@ -235,26 +278,52 @@ impl Frame {
 
 /// Appends the lines along which `other` meets triangle `t`: where it touches or crosses
 /// t's plane inside t, or, when it lies on t (parallel and closer than `gap`), its own edges
-/// where they pass over t.
-fn cut_lines(t: &[DVec3; 3], other_entry: &Entry, tolerance: f64, gap: f64, out: &mut Vec<Line>) {
+/// where they pass over t. The contact segments that run along t's own edges mark them in
+/// `touched` (`Contacts::touched_edges`).
+fn cut_lines(
+    t: &[DVec3; 3],
+    other_entry: &Entry,
+    tolerance: f64,
+    gap: f64,
+    out: &mut Vec<Line>,
+    touched: &mut [bool; 3],
+) {
     let other = &other_entry.vertices;
     let frame = Frame::of(t);
+    let own = t.map(|p| frame.to_2d(p));
+    let mut touch = |a: DVec2, b: DVec2| {
+        for (mark, hit) in touched.iter_mut().zip(touched_edges(&own, a, b, tolerance)) {
+            *mark |= hit;
+        }
+    };
     let height = other.map(|p| (p - frame.origin).dot(frame.normal));
     let other_normal = (other[1] - other[0]).cross(other[2] - other[0]).normalize();
     if frame.normal.dot(other_normal).abs() >= PARALLEL_COS && height.iter().all(|h| h.abs() <= gap) {
         // Lying on t. Neighbours in one plane meet t only along its edges, which cut nothing.
         let corners = other.map(|p| frame.to_2d(p));
         for i in (0..3).filter(|&i| !other_entry.inner_edge[i]) {
+            touch(corners[i], corners[(i + 1) % 3]);
             out.extend(clipped_line(t, &frame, corners[i], corners[(i + 1) % 3], tolerance));
         }
         return;
     }
-    out.extend(cut_line(t, other, tolerance));
+    if let Some((a, b)) = contact_segment(t, other, tolerance) {
+        touch(a, b);
+        out.extend(clipped_line(t, &frame, a, b, tolerance));
+    }
 }
 
 /// The line along which `other` touches or crosses triangle `t`, if that contact is a
 /// segment of positive length that reaches into `t`.
+#[cfg(test)]
 fn cut_line(t: &[DVec3; 3], other: &[DVec3; 3], tolerance: f64) -> Option<Line> {
+    let (a, b) = contact_segment(t, other, tolerance)?;
+    clipped_line(t, &Frame::of(t), a, b, tolerance)
+}
+
+/// The segment (2-D, in t's frame) along which `other` touches or crosses t's plane, if it
+/// has a positive length; `None` for a triangle in t's plane (`cut_lines` handles it).
+fn contact_segment(t: &[DVec3; 3], other: &[DVec3; 3], tolerance: f64) -> Option<(DVec2, DVec2)> {
     let frame = Frame::of(t);
     let height = other.map(|p| (p - frame.origin).dot(frame.normal));
     if height.iter().all(|h| h.abs() <= tolerance) {
@@ -284,8 +353,7 @@ fn cut_line(t: &[DVec3; 3], other: &[DVec3; 3], tolerance: f64) -> Option<Line> 
             }
         }
     }
-    let (a, b) = segment?;
-    clipped_line(t, &frame, a, b, tolerance)
+    segment
 }
 
 /// The line through segment a-b (2-D, in t's frame) if the segment reaches into triangle t

@@ -12,7 +12,7 @@
 //! shapes"): every emitting side of its triangles gets a triangular grid of light samples
 //! of its own (`emitter_grid` says how fine), up to `MAX_EMITTER_SAMPLES` for the scene.
 
-use super::contact::{Pieces, contact_pieces};
+use super::contact::{Contacts, PARALLEL_COS, Pieces, contacts};
 use super::{Light, Rgb, Scene, SpotCone, Triangle};
 use crate::{Error, Result};
 use glam::DVec3;
@@ -120,8 +120,8 @@ pub struct Patches {
     pub emitters: Vec<Emitter>,
     /// One line each about what tessellation could not do as asked (emitters past the cap).
     pub notes: Vec<String>,
-    /// The runs of patches that one piece of a source triangle (after the contact cuts) was
-    /// split into, in order: the image's gather treats the patches of a piece as one surface
+    /// The runs of patches that one piece of the surfaces (after the contact cuts) was split
+    /// into, in order: the image's gather treats the patches of a piece as one surface
     /// (`Piece`). Empty for patches made by hand: every patch is then a piece of its own.
     pub pieces: Vec<Piece>,
     /// The source triangles (after the contact cuts) that `split_into` cut into a lattice of
@@ -146,9 +146,10 @@ pub struct Lattice {
     pub vertices: [DVec3; 3],
 }
 
-/// The patches `first..end` that one piece of a source triangle was split into (the whole
-/// triangle, or one convex polygon that the contact cuts leave of it): coplanar, facing the
-/// same way, and with no contact line between them (the contact cuts bound the pieces), so
+/// The patches `first..end` that one piece of the surfaces was split into (a convex polygon
+/// that the contact cuts leave of a source triangle, or consecutive whole source triangles
+/// whose union is convex, `ConvexRun`): coplanar, facing the same way, and with no contact
+/// line between them (the contact cuts and the touched edges bound the pieces), so
 /// a ray leaving any of them towards its front sees what one leaving a point of another
 /// right beside it sees. A two-sided surface's twins interleave (`sides` = 2): the piece's
 /// front patches are `first, first + 2, ...`, its backs `first + 1, first + 3, ...`, each a
@@ -158,6 +159,70 @@ pub struct Piece {
     pub first: u32,
     pub end: u32,
     pub sides: u32,
+}
+
+/// Whole source triangles (no contact cut them) of one surface and one plane, made one
+/// `Piece` while their union is a convex polygon and no contact runs along the edges they
+/// share (`Contacts::touched_edges`): then, like a convex polygon of the cuts, no contact line
+/// lies between any two of their points, and the gather may take one's fragment for
+/// another's. A quad's two triangles become one piece, so the pixels along its diagonal no
+/// longer go to the gather's edge search.
+struct ConvexRun {
+    /// Its triangles' surface, and whether they are first-shot emitters or not.
+    surface: (usize, std::mem::Discriminant<PatchKind>),
+    normal: DVec3,
+    /// The union's corners, counter-clockwise about `normal`.
+    corners: Vec<DVec3>,
+    /// Whether a contact runs along the edge from corner i to corner i + 1.
+    touched: Vec<bool>,
+}
+
+impl ConvexRun {
+    fn new(surface: (usize, std::mem::Discriminant<PatchKind>), t: &[DVec3; 3], touched: [bool; 3]) -> ConvexRun {
+        let normal = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+        ConvexRun { surface, normal, corners: t.to_vec(), touched: touched.to_vec() }
+    }
+
+    /// Adds triangle `t` (edge i from vertex i to i + 1 touched by a contact where `touched`
+    /// says so) if it lies in the run's plane, facing its way, shares an edge with the
+    /// union's boundary that no contact runs along, and the union stays convex.
+    fn join(&mut self, t: &[DVec3; 3], touched: [bool; 3]) -> bool {
+        let normal = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+        if normal.dot(self.normal) < PARALLEL_COS {
+            return false;
+        }
+        let n = self.corners.len();
+        for i in 0..3 {
+            let (a, b, c) = (t[i], t[(i + 1) % 3], t[(i + 2) % 3]);
+            // Both wind counter-clockwise, so the shared edge runs b -> a along the union.
+            let Some(k) = (0..n).find(|&k| self.corners[k] == b && self.corners[(k + 1) % n] == a) else {
+                continue;
+            };
+            if touched[i] || self.touched[k] {
+                return false;
+            }
+            let mut corners = self.corners.clone();
+            corners.insert(k + 1, c);
+            if !is_convex(&corners, self.normal) {
+                return false;
+            }
+            self.corners = corners;
+            self.touched.splice(k..=k, [touched[(i + 1) % 3], touched[(i + 2) % 3]]);
+            return true;
+        }
+        false
+    }
+}
+
+/// Whether the polygon (corners counter-clockwise about `normal`) turns left, or runs
+/// straight on, at every corner.
+fn is_convex(corners: &[DVec3], normal: DVec3) -> bool {
+    let n = corners.len();
+    (0..n).all(|i| {
+        let (p, q, r) = (corners[i], corners[(i + 1) % n], corners[(i + 2) % n]);
+        let (e, f) = (q - p, r - q);
+        e.cross(f).dot(normal) >= -1e-9 * e.length() * f.length()
+    })
 }
 
 /// An emitting shape as a first-shot light: the sides of its triangles that emit, each a
@@ -258,7 +323,7 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
             SourceTriangle::new(scene, s, t, triangle)?;
         }
     }
-    let pieces = contact_pieces(scene);
+    let Contacts { pieces, touched_edges } = contacts(scene);
     let (mut count, mut light_count) = (0u64, 0u64);
     for (s, surface) in scene.surfaces.iter().enumerate() {
         let copies = if surface.two_sided { 2 } else { 1 };
@@ -314,6 +379,8 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
         pieces: Vec::new(),
         lattices: Vec::new(),
     };
+    // The last piece while it is whole triangles whose union is convex (`ConvexRun`).
+    let mut run: Option<ConvexRun> = None;
     for (s, surface) in scene.surfaces.iter().enumerate() {
         let copies = if surface.two_sided { 2 } else { 1 };
         for (t, triangle) in surface.triangles.iter().enumerate() {
@@ -339,7 +406,25 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
                         out.lattices.push(Lattice { first, k: k as u32, sides: copies, vertices: source.vertices });
                     }
                 }
-                out.pieces.push(Piece { first, end: out.patches.len() as u32, sides: copies });
+                let end = out.patches.len() as u32;
+                if pieces.contains_key(&(s, t)) {
+                    run = None;
+                } else {
+                    // A whole triangle: it joins the piece before it where that stays one
+                    // convex surface (a quad's two triangles, a fan, a strip).
+                    let touched = touched_edges.get(&(s, t)).copied().unwrap_or_default();
+                    if let (Some(r), Some(last)) = (&mut run, out.pieces.last_mut())
+                        && r.surface == (s, std::mem::discriminant(&kind(false)))
+                        && last.end == first
+                        && last.sides == copies
+                        && r.join(&triangle.vertices, touched)
+                    {
+                        last.end = end;
+                        continue;
+                    }
+                    run = Some(ConvexRun::new((s, std::mem::discriminant(&kind(false))), &triangle.vertices, touched));
+                }
+                out.pieces.push(Piece { first, end, sides: copies });
             }
         }
     }
@@ -1234,5 +1319,53 @@ pub(crate) mod tests {
         assert_eq!(stats.samples, 16);
         let area = 2.0 * triangles.iter().copied().map(triangle_area).sum::<f64>() + 0.25;
         assert!((stats.total_area - area).abs() <= ROUNDING * area);
+    }
+
+    /// Whole triangles of one plane join one piece while their union stays convex and no
+    /// contact runs along the edges they share; anything else starts a piece of its own.
+    #[test]
+    fn whole_coplanar_triangles_join_one_convex_piece() {
+        let v = |x: f64, z: f64| DVec3::new(x, 0.0, z);
+        // A square floor (facing +y) as two triangles sharing the diagonal (0,0)-(2,2).
+        let square = [[v(0.0, 0.0), v(2.0, 2.0), v(2.0, 0.0)], [v(0.0, 0.0), v(0.0, 2.0), v(2.0, 2.0)]];
+        let pieces = |surfaces: Vec<Surface>, lights: Vec<Light>| {
+            let patches = tessellate(&scene_of(surfaces, lights), 0.5).unwrap();
+            patches.pieces.iter().map(|p| (p.first, p.end)).collect::<Vec<_>>()
+        };
+        let floor = pieces(vec![surface(&square, false)], vec![]);
+        assert_eq!(floor.len(), 1, "{floor:?}");
+        // Two-sided: one piece too, its twins interleaved.
+        assert_eq!(pieces(vec![surface(&square, true)], vec![]).len(), 1);
+
+        // A wall standing on the diagonal: a contact along the shared edge, which cuts
+        // nothing, keeps the halves apart.
+        let wall = [[v(0.0, 0.0), v(2.0, 2.0), DVec3::new(1.0, 1.0, 1.0)]];
+        let walled = pieces(vec![surface(&square, false), surface(&wall, false)], vec![]);
+        assert_eq!(walled.len(), 3, "{walled:?}");
+        let contacts =
+            crate::scene::contact::contacts(&scene_of(vec![surface(&square, false), surface(&wall, false)], vec![]));
+        assert!(contacts.pieces.is_empty(), "the wall on the diagonal cuts nothing");
+        // Edge 0 of the first triangle and edge 2 of the second are the diagonal.
+        assert_eq!(contacts.touched_edges.get(&(0, 0)), Some(&[true, false, false]));
+        assert_eq!(contacts.touched_edges.get(&(0, 1)), Some(&[false, false, true]));
+
+        // An L of three triangles: the third would make the union concave.
+        let l_shape = [square[0], square[1], [v(2.0, 0.0), v(2.0, 2.0), v(4.0, -2.0)]];
+        let mut bent = l_shape;
+        bent[2] = [v(2.0, 0.0), v(2.0, 2.0), v(3.0, 0.0)];
+        assert_eq!(pieces(vec![surface(&bent, false)], vec![]).len(), 1, "a convex pentagon");
+        assert_eq!(pieces(vec![surface(&l_shape, false)], vec![]).len(), 2, "concave at (2, 0)");
+
+        // Not in one plane, facing the other way, or not sharing an edge: apart.
+        let mut folded = square;
+        folded[1] = [v(0.0, 0.0), DVec3::new(0.0, 0.5, 2.0), v(2.0, 2.0)];
+        assert_eq!(pieces(vec![surface(&folded, false)], vec![]).len(), 2);
+        let mut flipped = square;
+        flipped[1] = [v(0.0, 0.0), v(2.0, 2.0), v(0.0, 2.0)];
+        assert_eq!(pieces(vec![surface(&flipped, false)], vec![]).len(), 2);
+        let apart = [square[0], [v(0.0, 3.0), v(0.0, 5.0), v(2.0, 5.0)]];
+        assert_eq!(pieces(vec![surface(&apart, false)], vec![]).len(), 2);
+        // Two surfaces are never one piece, even where they meet edge to edge.
+        assert_eq!(pieces(vec![surface(&square[..1], false), surface(&square[1..], false)], vec![]).len(), 2);
     }
 }
