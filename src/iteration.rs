@@ -125,8 +125,14 @@ pub const AUTO_BUNDLE_LINE_PIXELS: f64 = 1.5;
 ///   average over directions. Its J_j is the mean of those lines' radiance weighted by the
 ///   area they stand for, so a patch crossed by fewer than one line has a J_j that is zero
 ///   on most steps and a multiple of its true value on the others: the spikes the image's
-///   gather then reflects. The rule gives the patch of median area one line per step on
-///   average: r >= 2 radius sqrt(2 / A_median).
+///   gather then reflects from a glossy patch, which sends the image its last few steps' J.
+///   A diffuse patch sends the image the mean of its K_j over the image steps
+///   (`bundle_reflect`'s image_outgoing), where one step's spike is one sample among many.
+///   The rule gives the patch of median area one line per step on average,
+///   r >= 2 radius sqrt(2 / A_median), counting a patch that reflects nothing glossily as
+///   needing no line (`is_glossy`): where such patches are most of the scene's (walls of
+///   fine mesh triangles, a diffuse fractal), the image alone decides, and with it four
+///   bundles a step (docs/PERFORMANCE.md, "Diffuse patches need no line a step").
 /// - The images: the gather reads the line through a pixel's surface point, so the
 ///   sender it finds is the surface x's own ray hits only where that surface has a fragment
 ///   on the line; elsewhere (near edges and small patches) the indirect light is blurred
@@ -139,17 +145,35 @@ pub const AUTO_BUNDLE_LINE_PIXELS: f64 = 1.5;
 /// constants (one line per median patch, 1.5 pixels) are where the error per second of the
 /// bundled scenes peaked at 256 x 256 and 512 x 512 (docs/PERFORMANCE.md, "Bundle
 /// resolution").
-pub fn auto_bundle_resolution(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> u32 {
-    BundleNeeds::of(patches, radius, views).resolution()
+pub fn auto_bundle_resolution(
+    patches: &Patches,
+    materials: &[crate::scene::Material],
+    radius: f64,
+    views: &[crate::scene::NamedCamera],
+) -> u32 {
+    BundleNeeds::of(patches, materials, radius, views).resolution()
+}
+
+/// Whether patch `p` reflects glossily (a max-Phong material with some specular part): only
+/// such patches ask the patches' rule for lines (`BundleNeeds::of`).
+pub fn is_glossy(p: &crate::scene::Patch, materials: &[crate::scene::Material]) -> bool {
+    use crate::scene::MaterialKind;
+    p.material
+        .and_then(|m| materials.get(m as usize))
+        .is_some_and(|m| matches!(m.kind, MaterialKind::Phong { specular, .. } if specular.iter().any(|&s| s > 0.0)))
 }
 
 /// The two needs of `auto_bundle_resolution`, before rounding: the resolution that gives the
 /// median patch one line a step, and the one that makes a line at most
 /// `AUTO_BUNDLE_LINE_PIXELS` pixel footprints wide (0 where a rule has nothing to go by).
+/// Also what `auto_bundles_per_step` weighs: the scene's patches and the largest view's
+/// pixels.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BundleNeeds {
     pub patches: f64,
     pub image: f64,
+    pub patch_count: usize,
+    pub view_pixels: u64,
 }
 
 /// The bundles a step takes unless told (`--bundles-per-step auto`): four where the image
@@ -162,8 +186,18 @@ pub struct BundleNeeds {
 /// less) four bundles of 352 took twice the time of a step for no lower error, where the
 /// Cornell box (image 256, patches 70 at 256 x 256) reached a third of the squared error in
 /// 1.5 times the time (docs/PERFORMANCE.md, "Four bundles a step").
+///
+/// And one where the scene has at least as many patches as the largest view has pixels:
+/// four bundles repeat the per-patch work (the same lines in all, four times the patches
+/// rasterised, reflected and finalised) to lower the variance of the per-pixel gather, so
+/// they pay only while that work is small against the pixels'. The engine room's 295 463
+/// patches at 480 x 360 took 6 times as long a step with four bundles, for 1.2 times less
+/// noise at 20 steps; the Cornell box with walls of 20 972 fine mesh patches and the
+/// Sierpinski scene with a diffuse fractal (22 420) at 256 x 256 halved their squared error
+/// in the same time (docs/PERFORMANCE.md, "Diffuse patches need no line a step").
 pub fn auto_bundles_per_step(needs: &BundleNeeds) -> u32 {
-    if needs.image >= 2.0 * needs.patches { BUNDLES_PER_STEP } else { 1 }
+    let few_patches = (needs.patch_count as u64) < needs.view_pixels;
+    if needs.image >= 2.0 * needs.patches && few_patches { BUNDLES_PER_STEP } else { 1 }
 }
 
 impl BundleNeeds {
@@ -175,11 +209,25 @@ impl BundleNeeds {
     }
 
     /// The needs of `patches` in a bounding sphere of `radius`, seen by `views`.
-    pub fn of(patches: &Patches, radius: f64, views: &[crate::scene::NamedCamera]) -> BundleNeeds {
+    pub fn of(
+        patches: &Patches,
+        materials: &[crate::scene::Material],
+        radius: f64,
+        views: &[crate::scene::NamedCamera],
+    ) -> BundleNeeds {
         let sampled = patches.median_sample();
-        let mut areas: Vec<f64> = sampled.clone().map(|p| p.area).collect();
-        let by_patches = crate::scene::tessellate::median(&mut areas).map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
+        // A patch that reflects no glossy light counts as needing no line (an infinite
+        // area): the image reads it through the mean of its K_j over the image steps, which
+        // carries none of one step's spike. So the median is a glossy patch's only where
+        // those are most of the patches.
+        let mut areas: Vec<f64> =
+            sampled.clone().map(|p| if is_glossy(p, materials) { p.area } else { f64::INFINITY }).collect();
+        let by_patches = crate::scene::tessellate::median(&mut areas)
+            .filter(|a| a.is_finite())
+            .map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
         let mut wanted: f64 = 0.0;
+        let view_pixels =
+            views.iter().map(|v| u64::from(v.camera.width) * u64::from(v.camera.height)).max().unwrap_or(0);
         for view in views {
             let c = &view.camera;
             let forward = (c.look_at - c.position).normalize_or_zero();
@@ -216,7 +264,7 @@ impl BundleNeeds {
                 wanted = wanted.max(2.0 * radius / footprint);
             }
         }
-        BundleNeeds { patches: by_patches, image: wanted }
+        BundleNeeds { patches: by_patches, image: wanted, patch_count: patches.patches.len(), view_pixels }
     }
 }
 

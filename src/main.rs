@@ -89,7 +89,8 @@ pub(crate) struct RenderArgs {
     #[arg(long)]
     no_first_shot: bool,
     /// Pixels along an edge of each parallel projection of the iteration, or "auto": from
-    /// the patch sizes and the image (the default unless the scene's [settings] set one).
+    /// the glossy patches' sizes and the image (the default unless the scene's [settings]
+    /// set one).
     #[arg(long, value_name = "R|auto", value_parser = parse_resolution, allow_negative_numbers = true)]
     bundle_resolution: Option<Resolution>,
     /// Random seed; the same seed, scene and flags give the same image.
@@ -127,8 +128,8 @@ pub(crate) struct RenderArgs {
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     window_steps: Option<u32>,
     /// Bundles each step of the iteration draws: 1, 4, or "auto" (the default unless the
-    /// scene sets it: 4 where the image needs at least twice the lines the patches do, else
-    /// 1). With 4, each pixel of a 2 x 2 block gathers through its own bundle, so that
+    /// scene sets it: 4 where the image needs at least twice the lines the patches do and
+    /// the patches are fewer than the largest view's pixels, else 1). With 4, each pixel of a 2 x 2 block gathers through its own bundle, so that
     /// neighbouring pixels' errors are independent; the automatic --bundle-resolution is
     /// halved for them (as many lines a step).
     #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = parse_bundles_per_step)]

@@ -221,7 +221,7 @@ impl RenderOptions {
             return (resolution, per_step);
         }
         let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
-        let needs = crate::iteration::BundleNeeds::of(patches, radius, &self.views(scene));
+        let needs = crate::iteration::BundleNeeds::of(patches, &scene.materials, radius, &self.views(scene));
         let per_step = self.bundles_per_step.unwrap_or_else(|| crate::iteration::auto_bundles_per_step(&needs));
         let resolution =
             self.bundle_resolution.unwrap_or_else(|| needs.resolution() / crate::iteration::pixel_stride(per_step));

@@ -219,11 +219,11 @@ fn test04_tiny_render_writes_exr_png_and_stats() {
     let cpu = json["adapter"]["device_type"] == "Cpu";
     assert_eq!(json["gather"], if cpu { "split" } else { "fused" }, "{text}");
     // From the scene's [settings]: seed 1; 2 x 2 light cells give 9 samples. No
-    // bundle_resolution there, so the automatic one: for the 40 mm patches (median area
-    // about 378 mm^2) in a bounding sphere of radius 480 mm, 2 x 480 x sqrt(2 / 378) = 70,
-    // rounded up to 128 (the 32 x 32 image asks for less); the patches set it, so one
-    // bundle a step (iteration::auto_bundles_per_step).
-    assert_eq!(json["bundle_resolution"], 128);
+    // bundle_resolution there, so the automatic one: the Cornell box is diffuse, so its
+    // patches ask for no lines (iteration::is_glossy), and the 32 x 32 image asks for less
+    // than the smallest, 64; one bundle a step, as its 6065 patches outnumber the 1024
+    // pixels (iteration::auto_bundles_per_step).
+    assert_eq!(json["bundle_resolution"], 64);
     assert_eq!(json["bundles_per_step"], 1);
     assert_eq!(json["seed"], 1);
     assert_eq!(json["light_samples"], 9);

@@ -315,7 +315,7 @@ fn test07_the_automatic_bundle_resolution_follows_the_patches_and_the_image() {
     // CPU only. The two rules of `auto_bundle_resolution`, each checked alone against its
     // own closed form, then together, then at both clamps.
     use firstshot::iteration::{AUTO_BUNDLE_LINE_PIXELS, AUTO_BUNDLE_MAX, AUTO_BUNDLE_MIN, auto_bundle_resolution};
-    use firstshot::scene::{Camera, NamedCamera};
+    use firstshot::scene::{Camera, Material, MaterialKind, NamedCamera};
     let up64 = |x: f64| ((x.ceil() as u32).div_ceil(64) * 64).clamp(AUTO_BUNDLE_MIN, AUTO_BUNDLE_MAX);
     // A 10 x 10 grid of right triangles of legs s (area s^2 / 2) in the plane z = 0, facing +z.
     let grid = |s: f64| -> Vec<[DVec3; 3]> {
@@ -327,12 +327,36 @@ fn test07_the_automatic_bundle_resolution_follows_the_patches_and_the_image() {
             .collect()
     };
     let radius = 10.0;
+    // Glossy patches (material 0; only they ask the patch rule for lines), and diffuse ones.
+    let materials = [
+        Material {
+            name: "glossy".into(),
+            kind: MaterialKind::Phong { diffuse: [0.2; 3], specular: [0.3; 3], shininess: 10.0 },
+        },
+        Material { name: "matte".into(), kind: MaterialKind::Diffuse { albedo: [0.5; 3] } },
+    ];
+    let with_material = |mut patches: firstshot::scene::Patches, m: u32| {
+        patches.patches.iter_mut().for_each(|p| p.material = Some(m));
+        patches
+    };
+    let auto_bundle_resolution = |patches: &firstshot::scene::Patches, radius: f64, views: &[NamedCamera]| {
+        auto_bundle_resolution(patches, &materials, radius, views)
+    };
     // Patches: one line per step on average for the median patch, r = 2 radius sqrt(2 / A).
     let s = 0.05;
-    let patches = common::patches_of(&grid(s), vec![]);
+    let patches = with_material(common::patches_of(&grid(s), vec![]), 0);
     let area = s * s / 2.0;
     let by_patches = up64(2.0 * radius * (2.0 / area).sqrt());
     assert_eq!(auto_bundle_resolution(&patches, radius, &[]), by_patches);
+    // The same patches diffuse, or without a material (an area light's), ask for none; half
+    // glossy and half diffuse, the median is the glossy ones' at the border.
+    assert_eq!(auto_bundle_resolution(&with_material(patches.clone(), 1), radius, &[]), AUTO_BUNDLE_MIN);
+    assert_eq!(auto_bundle_resolution(&common::patches_of(&grid(s), vec![]), radius, &[]), AUTO_BUNDLE_MIN);
+    let mut mixed = patches.clone();
+    mixed.patches.iter_mut().skip(60).for_each(|p| p.material = Some(1));
+    assert_eq!(auto_bundle_resolution(&mixed, radius, &[]), by_patches, "60 of 100 glossy");
+    mixed.patches.iter_mut().skip(40).for_each(|p| p.material = Some(1));
+    assert_eq!(auto_bundle_resolution(&mixed, radius, &[]), AUTO_BUNDLE_MIN, "40 of 100 glossy");
     assert!(by_patches > AUTO_BUNDLE_MIN && by_patches < AUTO_BUNDLE_MAX, "{by_patches}");
     // ... and the result, fed back: A / (2 dP) >= 1 with dP the square of 2 radius / r.
     let line = 2.0 * radius / by_patches as f64;
@@ -340,7 +364,7 @@ fn test07_the_automatic_bundle_resolution_follows_the_patches_and_the_image() {
 
     // The image: large patches (the patch rule asks for the minimum) seen by a camera on the
     // grid's axis at distance 8 from its plane, looking at its centre.
-    let big = common::patches_of(&grid(1.0), vec![]);
+    let big = with_material(common::patches_of(&grid(1.0), vec![]), 0);
     assert_eq!(auto_bundle_resolution(&big, radius, &[]), AUTO_BUNDLE_MIN);
     let centre = DVec3::new(5.0, 5.0, 0.0);
     let camera = |height: u32| NamedCamera {
@@ -380,7 +404,7 @@ fn test07_the_automatic_bundle_resolution_follows_the_patches_and_the_image() {
     away.camera.look_at = away.camera.position + DVec3::new(0.0, 0.0, 1.0);
     assert_eq!(auto_bundle_resolution(&big, radius, &[away]), AUTO_BUNDLE_MIN);
     // Patches far too small for any grid: the largest the rule takes by itself.
-    let tiny = common::patches_of(&grid(1e-4), vec![]);
+    let tiny = with_material(common::patches_of(&grid(1e-4), vec![]), 0);
     assert_eq!(auto_bundle_resolution(&tiny, radius, &[]), AUTO_BUNDLE_MAX);
 }
 
