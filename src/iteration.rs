@@ -611,3 +611,24 @@ impl Iteration {
         encoder.clear_buffer(&self.overflow, 0, None);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn four_bundles_where_the_image_sets_the_grid_and_the_patches_are_few() {
+        let needs = |patches: f64, image: f64, patch_count: usize| BundleNeeds {
+            patches,
+            image,
+            patch_count,
+            view_pixels: 256 * 256,
+        };
+        assert_eq!(auto_bundles_per_step(&needs(70.0, 256.0, 6065)), BUNDLES_PER_STEP, "the Cornell box");
+        assert_eq!(auto_bundles_per_step(&needs(0.0, 256.0, 6065)), BUNDLES_PER_STEP, "all diffuse");
+        assert_eq!(auto_bundles_per_step(&needs(704.0, 400.0, 22_420)), 1, "the patches set the grid");
+        assert_eq!(auto_bundles_per_step(&needs(200.0, 399.0, 6065)), 1, "the image needs less than twice");
+        assert_eq!(auto_bundles_per_step(&needs(0.0, 640.0, 256 * 256)), 1, "as many patches as pixels");
+        assert_eq!(auto_bundles_per_step(&needs(0.0, 640.0, 256 * 256 - 1)), BUNDLES_PER_STEP);
+    }
+}
