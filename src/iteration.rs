@@ -128,11 +128,12 @@ pub const AUTO_BUNDLE_LINE_PIXELS: f64 = 1.5;
 ///   gather then reflects from a glossy patch, which sends the image its last few steps' J.
 ///   A diffuse patch sends the image the mean of its K_j over the image steps
 ///   (`bundle_reflect`'s image_outgoing), where one step's spike is one sample among many.
-///   The rule gives the patch of median area one line per step on average,
-///   r >= 2 radius sqrt(2 / A_median), counting a patch that reflects nothing glossily as
-///   needing no line (`is_glossy`): where such patches are most of the scene's (walls of
-///   fine mesh triangles, a diffuse fractal), the image alone decides, and with it four
-///   bundles a step (docs/PERFORMANCE.md, "Diffuse patches need no line a step").
+///   The rule gives the glossy patch of median area (`is_glossy`) one line per step on
+///   average, r >= 2 radius sqrt(2 / A_median), where glossy patches fill at least
+///   `GLOSSY_SHARE` of what the views see; otherwise (walls of fine mesh triangles, a
+///   diffuse fractal, a small glossy object) the image alone decides, and with it four
+///   bundles a step where the patches are few (docs/PERFORMANCE.md, "Diffuse patches need
+///   no line a step").
 /// - The images: the gather reads the line through a pixel's surface point, so the
 ///   sender it finds is the surface x's own ray hits only where that surface has a fragment
 ///   on the line; elsewhere (near edges and small patches) the indirect light is blurred
@@ -153,6 +154,13 @@ pub fn auto_bundle_resolution(
 ) -> u32 {
     BundleNeeds::of(patches, materials, radius, views).resolution()
 }
+
+/// The share of what the views see (solid angle) from which glossy patches ask the patches'
+/// rule for lines (`BundleNeeds::of`): where they fill less, their spikes reach little of the
+/// image, and the rest of it is better served by the image's grid (four bundles where the
+/// patches are few). A judgement, not a fit: the shipped scenes' glossy shares are 0 and
+/// 0.13-0.30, and none of their choices turns on it.
+pub const GLOSSY_SHARE: f64 = 0.1;
 
 /// Whether patch `p` reflects glossily (a max-Phong material with some specular part): only
 /// such patches ask the patches' rule for lines (`BundleNeeds::of`).
@@ -216,15 +224,16 @@ impl BundleNeeds {
         views: &[crate::scene::NamedCamera],
     ) -> BundleNeeds {
         let sampled = patches.median_sample();
-        // A patch that reflects no glossy light counts as needing no line (an infinite
-        // area): the image reads it through the mean of its K_j over the image steps, which
-        // carries none of one step's spike. So the median is a glossy patch's only where
-        // those are most of the patches.
-        let mut areas: Vec<f64> =
-            sampled.clone().map(|p| if is_glossy(p, materials) { p.area } else { f64::INFINITY }).collect();
-        let by_patches = crate::scene::tessellate::median(&mut areas)
-            .filter(|a| a.is_finite())
-            .map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
+        // Only glossy patches ask for lines: the image reads a diffuse sender through the mean
+        // of its K_j over the image steps, which carries none of one step's spike, and a
+        // glossy one through its last few steps. Their median, so that how finely the
+        // diffuse surfaces are cut does not decide (a Sierpinski room whose walls outnumber
+        // the fractal's triangles got four bundles of 224 and 2 to 3 times the error).
+        let mut glossy_areas: Vec<f64> = sampled.clone().filter(|p| is_glossy(p, materials)).map(|p| p.area).collect();
+        let glossy_need =
+            crate::scene::tessellate::median(&mut glossy_areas).map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
+        // The glossy patches' share of what the views see (solid angle, occlusion ignored).
+        let (mut seen_all, mut seen_glossy) = (0.0f64, 0.0f64);
         let mut wanted: f64 = 0.0;
         let view_pixels =
             views.iter().map(|v| u64::from(v.camera.width) * u64::from(v.camera.height)).max().unwrap_or(0);
@@ -239,6 +248,7 @@ impl BundleNeeds {
             let mut seen: Vec<(f64, f64)> = sampled
                 .clone()
                 .filter_map(|p| {
+                    let glossy = is_glossy(p, materials);
                     let v = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - c.position;
                     let z = v.dot(forward);
                     if z <= 0.0 || v.dot(right).abs() > tan_x * z || v.dot(up).abs() > tan_y * z {
@@ -246,6 +256,10 @@ impl BundleNeeds {
                     }
                     let d2 = v.length_squared();
                     let solid_angle = p.area * p.normal.dot(v).abs() / (d2 * d2.sqrt());
+                    seen_all += solid_angle;
+                    if glossy {
+                        seen_glossy += solid_angle;
+                    }
                     (solid_angle > 0.0).then(|| (d2.sqrt(), solid_angle))
                 })
                 .collect();
@@ -264,6 +278,13 @@ impl BundleNeeds {
                 wanted = wanted.max(2.0 * radius / footprint);
             }
         }
+        // Without a view that sees a patch, the glossy patches' share of the patches.
+        let share = if seen_all > 0.0 {
+            seen_glossy / seen_all
+        } else {
+            glossy_areas.len() as f64 / sampled.clone().count().max(1) as f64
+        };
+        let by_patches = if share >= GLOSSY_SHARE { glossy_need } else { 0.0 };
         BundleNeeds { patches: by_patches, image: wanted, patch_count: patches.patches.len(), view_pixels }
     }
 }

@@ -348,15 +348,17 @@ fn test07_the_automatic_bundle_resolution_follows_the_patches_and_the_image() {
     let area = s * s / 2.0;
     let by_patches = up64(2.0 * radius * (2.0 / area).sqrt());
     assert_eq!(auto_bundle_resolution(&patches, radius, &[]), by_patches);
-    // The same patches diffuse, or without a material (an area light's), ask for none; half
-    // glossy and half diffuse, the median is the glossy ones' at the border.
+    // The same patches diffuse, or without a material (an area light's), ask for none.
     assert_eq!(auto_bundle_resolution(&with_material(patches.clone(), 1), radius, &[]), AUTO_BUNDLE_MIN);
     assert_eq!(auto_bundle_resolution(&common::patches_of(&grid(s), vec![]), radius, &[]), AUTO_BUNDLE_MIN);
-    let mut mixed = patches.clone();
-    mixed.patches.iter_mut().skip(60).for_each(|p| p.material = Some(1));
-    assert_eq!(auto_bundle_resolution(&mixed, radius, &[]), by_patches, "60 of 100 glossy");
-    mixed.patches.iter_mut().skip(40).for_each(|p| p.material = Some(1));
-    assert_eq!(auto_bundle_resolution(&mixed, radius, &[]), AUTO_BUNDLE_MIN, "40 of 100 glossy");
+    // Glossy patches among larger diffuse ones: theirs is the median, however many the
+    // diffuse ones are, while they are at least GLOSSY_SHARE of them (no view here: by count).
+    let mut mixed = with_material(common::patches_of(&[grid(s), grid(1.0)].concat(), vec![]), 1);
+    mixed.patches.iter_mut().take(100).for_each(|p| p.material = Some(0));
+    assert_eq!(auto_bundle_resolution(&mixed, radius, &[]), by_patches, "100 of 200 glossy");
+    let few = (firstshot::iteration::GLOSSY_SHARE * 200.0) as usize - 1;
+    mixed.patches.iter_mut().skip(few).take(100 - few).for_each(|p| p.material = Some(1));
+    assert_eq!(auto_bundle_resolution(&mixed, radius, &[]), AUTO_BUNDLE_MIN, "{few} of 200 glossy");
     assert!(by_patches > AUTO_BUNDLE_MIN && by_patches < AUTO_BUNDLE_MAX, "{by_patches}");
     // ... and the result, fed back: A / (2 dP) >= 1 with dP the square of 2 radius / r.
     let line = 2.0 * radius / by_patches as f64;
