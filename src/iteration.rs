@@ -248,7 +248,6 @@ impl BundleNeeds {
             let mut seen: Vec<(f64, f64)> = sampled
                 .clone()
                 .filter_map(|p| {
-                    let glossy = is_glossy(p, materials);
                     let v = (p.vertices[0] + p.vertices[1] + p.vertices[2]) / 3.0 - c.position;
                     let z = v.dot(forward);
                     if z <= 0.0 || v.dot(right).abs() > tan_x * z || v.dot(up).abs() > tan_y * z {
@@ -257,7 +256,7 @@ impl BundleNeeds {
                     let d2 = v.length_squared();
                     let solid_angle = p.area * p.normal.dot(v).abs() / (d2 * d2.sqrt());
                     seen_all += solid_angle;
-                    if glossy {
+                    if is_glossy(p, materials) {
                         seen_glossy += solid_angle;
                     }
                     (solid_angle > 0.0).then(|| (d2.sqrt(), solid_angle))

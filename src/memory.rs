@@ -136,10 +136,10 @@ pub fn predict(
     // The tessellated patch, and at most one `Piece` a patch (one per split polygon).
     let host_bytes_per_patch =
         (size_of::<crate::scene::Patch>() + size_of::<crate::scene::Piece>()) as u64 + UPLOAD_BYTES_PER_PATCH;
-    let pixels: u64 = options.views(scene).iter().map(|v| v.camera.width as u64 * v.camera.height as u64).sum();
+    let views = options.views(scene);
+    let pixels: u64 = views.iter().map(|v| v.camera.width as u64 * v.camera.height as u64).sum();
     // A supersampled camera item buffer's texels past one a pixel (id and depth, 8 bytes).
-    let supersampled_camera_bytes: u64 = options
-        .views(scene)
+    let supersampled_camera_bytes: u64 = views
         .iter()
         .map(|v| {
             let s = options.camera_supersample_for(&v.camera) as u64;

@@ -1118,6 +1118,7 @@ impl<'a> Renderer<'a> {
 
     /// Step `k` stage by stage, each submitted and timed on its own (`gpu::profile`); it
     /// leaves the same state as `submit_step`.
+    ///
     /// Every view's camera item buffer is rendered in it, also where a supersampled one would
     /// have served this step from an earlier raster, so that the profile shows its cost.
     pub fn profile_step(&mut self, k: u32, timer: &StageTimer, before: Vec<Stage<'_>>) -> Result<Vec<StageTime>> {

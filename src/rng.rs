@@ -177,6 +177,7 @@ mod tests {
         assert_ne!(first(3, 0), first(4, 0));
         assert_ne!(stratified_pixel_sample(3, 0).offset, stratified_pixel_sample(3, cells).offset);
     }
+
     #[test]
     fn same_seed_and_step_give_the_same_stream() {
         let a: Vec<f64> = (0..8)

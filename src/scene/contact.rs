@@ -73,11 +73,6 @@ pub struct Contacts {
     pub touched_edges: HashMap<(usize, usize), [bool; 3]>,
 }
 
-/// Every surface triangle that another surface touches or crosses, cut along those lines.
-pub fn contact_pieces(scene: &Scene) -> Pieces {
-    contacts(scene).pieces
-}
-
 /// Every surface triangle that another surface touches or crosses, cut along those lines,
 /// and the triangles' edges that contacts run along.
 pub fn contacts(scene: &Scene) -> Contacts {
@@ -551,7 +546,7 @@ mod tests {
             ],
             vec![],
         );
-        let pieces = contact_pieces(&scene);
+        let pieces = contacts(&scene).pieces;
         assert!(pieces.keys().all(|&(s, _)| s == 0), "only the floor is cut: {:?}", pieces.keys());
         let mut inside = 0.0;
         for (t, tri) in floor.iter().enumerate() {
@@ -581,10 +576,10 @@ mod tests {
         // The contact search goes through hash maps, whose order varies between instances.
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.toml");
         let (scene, _) = crate::scene::tessellate::tests::scene_from_file(&path);
-        let first = contact_pieces(&scene);
+        let first = contacts(&scene).pieces;
         assert!(!first.is_empty());
         for _ in 0..4 {
-            assert_eq!(contact_pieces(&scene), first);
+            assert_eq!(contacts(&scene).pieces, first);
         }
     }
 
@@ -692,7 +687,7 @@ mod tests {
         }
         assert!(floor_under > 0 && floor_outside > 0);
         // A piece is a whole convex polygon of the cuts, not each triangle fanned from it.
-        let cut = contact_pieces(&scene);
+        let cut = contacts(&scene).pieces;
         let fanned: usize =
             (0..scene.surfaces[0].triangles.len()).map(|t| cut.get(&(0, t)).map_or(1, |p| p.concat().len())).sum();
         assert!(

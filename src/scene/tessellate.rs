@@ -413,8 +413,9 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
                     // A whole triangle: it joins the piece before it where that stays one
                     // convex surface (a quad's two triangles, a fan, a strip).
                     let touched = touched_edges.get(&(s, t)).copied().unwrap_or_default();
+                    let surface_key = (s, std::mem::discriminant(&kind(false)));
                     if let (Some(r), Some(last)) = (&mut run, out.pieces.last_mut())
-                        && r.surface == (s, std::mem::discriminant(&kind(false)))
+                        && r.surface == surface_key
                         && last.end == first
                         && last.sides == copies
                         && r.join(&triangle.vertices, touched)
@@ -422,7 +423,7 @@ pub fn tessellate(scene: &Scene, patch_size: f64) -> Result<Patches> {
                         last.end = end;
                         continue;
                     }
-                    run = Some(ConvexRun::new((s, std::mem::discriminant(&kind(false))), &triangle.vertices, touched));
+                    run = Some(ConvexRun::new(surface_key, &triangle.vertices, touched));
                 }
                 out.pieces.push(Piece { first, end, sides: copies });
             }

@@ -148,8 +148,6 @@ fn bundle_side(n: vec3<f32>, d: vec3<f32>) -> f32 {
     return select(-1.0, 1.0, dot(n, d) >= 0.0);
 }
 
-// Direction (not normalised) through the sample point of pixel `pixel` of a camera or face:
-// forward + window position in tangent units.
 // The texel of the camera item buffer that holds `pixel` at this step's sample: with a
 // supersampled buffer (camera.size.w, GpuCamera in src/layout.rs) the sample's stratum among
 // the pixel's S x S texels, else the pixel itself.
@@ -159,6 +157,8 @@ fn camera_texel(camera: Camera, pixel: vec2<u32>) -> vec2<i32> {
     return vec2<i32>(pixel * s + min(cell, vec2<u32>(s - 1u)));
 }
 
+// Direction (not normalised) through the sample point of pixel `pixel` of a camera or face:
+// forward + window position in tangent units.
 fn pixel_direction(camera: Camera, pixel: vec2<u32>) -> vec3<f32> {
     let size = vec2<f32>(camera.size.xy);
     let ndc = vec2<f32>(
