@@ -18,8 +18,9 @@ WALLS = ("ceiling", "back wall", "right wall", "left wall")
 
 
 def grid_obj(path, quad, n):
-    """The quad v0..v3 as n x n squares, vertex (i, j) the bilinear blend at (i/n, j/n)."""
-    with open(path, "w") as f:
+    """The quad v0..v3 as n x n squares, vertex (i, j) the bilinear blend at (i/n, j/n);
+    written under a temporary name, then renamed."""
+    with open(path + ".tmp", "w") as f:
         for j in range(n + 1):
             for i in range(n + 1):
                 u, w = i / n, j / n
@@ -31,15 +32,20 @@ def grid_obj(path, quad, n):
                 a = j * (n + 1) + i + 1
                 # Counter-clockwise as the quad: (v0, v1, v2) and (v0, v2, v3) of each square.
                 f.write("f %d %d %d\nf %d %d %d\n" % (a, a + 1, a + n + 2, a, a + n + 2, a + n + 1))
+    os.replace(path + ".tmp", path)
 
 
 def main():
     if len(sys.argv) not in (2, 3):
         sys.exit(__doc__)
-    out, n = sys.argv[1], int(sys.argv[2]) if len(sys.argv) == 3 else 48
-    if n < 1:
-        sys.exit("N must be at least 1")
-    os.makedirs(out, exist_ok=True)
+    out, n = sys.argv[1], sys.argv[2] if len(sys.argv) == 3 else "48"
+    if not n.isdigit() or int(n) < 1:
+        sys.exit(f"mesh_walls.py: N must be a whole number of at least 1, got {n!r}")
+    n = int(n)
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as e:
+        sys.exit(f"mesh_walls.py: cannot make the folder {out!r}: {e.strerror}")
     blocks = open(SOURCE).read().split("[[shapes]]")
     kept = [blocks[0]]
     for block in blocks[1:]:
