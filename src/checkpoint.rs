@@ -3,18 +3,19 @@
 //! every patch, the image sum (its two halves) and the step count: step k's random numbers
 //! depend only on (seed, k), so no generator state needs saving.
 //!
-//! File layout (little endian): magic "FSCKPT04" (01: before the state's running means and
+//! File layout (little endian): magic "FSCKPT05" (01: before the state's running means and
 //! the image sum's two halves; 02: before the state's glossy history; 03: before the
-//! emission a pixel sees moved from the image sum's first half to its second), fingerprint u64, step u32, state length
+//! emission a pixel sees moved from the image sum's first half to its second; 04: before
+//! the glossy history's six packed entries in place of three), fingerprint u64, step u32, state length
 //! u64, image-sum length u64, the two byte arrays, then an FNV-1a 64 checksum of all that
 //! precedes it.
 
 use crate::{Error, Result};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"FSCKPT04";
+const MAGIC: &[u8; 8] = b"FSCKPT05";
 /// Earlier versions' magics, refused with a word on why.
-const OLDER_MAGICS: [&[u8; 8]; 3] = [b"FSCKPT01", b"FSCKPT02", b"FSCKPT03"];
+const OLDER_MAGICS: [&[u8; 8]; 4] = [b"FSCKPT01", b"FSCKPT02", b"FSCKPT03", b"FSCKPT04"];
 
 /// The iteration state after `step` steps.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -104,13 +105,20 @@ impl Checkpoint {
         direct_estimates: &dyn Fn(u32) -> u32,
         view_pixels: Option<&[u64]>,
     ) -> Result<()> {
-        if !self.state.len().is_multiple_of(4) || !self.image_sum.len().is_multiple_of(16) {
+        use crate::layout::GpuPatchState;
+        if !self.state.len().is_multiple_of(size_of::<GpuPatchState>()) || !self.image_sum.len().is_multiple_of(16) {
             return Err(corrupt(path, "its arrays are not whole numbers"));
         }
         let floats = |bytes: &[u8]| -> Vec<f32> {
             bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
         };
-        if floats(&self.state).iter().any(|v| !v.is_finite()) {
+        // The state's float fields; the glossy history's entries are packed bits, which read
+        // as floats may look like anything.
+        let state: Vec<GpuPatchState> = bytemuck::pod_collect_to_vec(&self.state);
+        let finite = |s: &GpuPatchState| {
+            [s.incoming, s.direction, s.diffuse, s.mean_radiance, s.diffuse_sum].iter().flatten().all(|v| v.is_finite())
+        };
+        if !state.iter().all(finite) {
             return Err(corrupt(path, "its iteration state holds numbers that are not finite"));
         }
         let Some(image_steps) = self.step.checked_sub(burn_in).filter(|&n| n > 0) else {
@@ -183,10 +191,20 @@ mod tests {
     fn numbers_a_run_cannot_write_are_refused() {
         let p = Path::new("x.checkpoint");
         let pixel = |rgb: f32, w: f32| [rgb, rgb, rgb, w].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>();
+        // One patch's state: finite floats, and a glossy history of packed bits that read as
+        // floats would be NaN (a run writes such bits: they are not floats).
+        let patch = crate::layout::GpuPatchState {
+            incoming: [0.5; 4],
+            direction: [0.0, 1.0, 0.0, 0.0],
+            diffuse: [0.5; 4],
+            mean_radiance: [0.5; 4],
+            diffuse_sum: [1.0; 4],
+            earlier: [[0x7fc0_0001, 0xffff_ffff]; crate::layout::GLOSSY_HISTORY],
+        };
         let good = Checkpoint {
             fingerprint: 1,
             step: 12,
-            state: [0.5f32; 8].iter().flat_map(|v| v.to_le_bytes()).collect(),
+            state: bytemuck::bytes_of(&patch).to_vec(),
             image_sum: [pixel(0.25, 2.0), pixel(3.0, 2.0)].concat(),
         };
         good.check_numbers(p, 10, &|n| n, None).unwrap();

@@ -166,16 +166,20 @@ pub struct GpuPatchState {
     /// rgb: the sum of K_j over the image steps so far; w: their number. The image's senders
     /// reflect its mean diffusely (docs/ALGORITHM.md 6).
     pub diffuse_sum: [f32; 4],
-    /// The J_j of the `GLOSSY_HISTORY` steps before this one, newest first: xyz the bits of
-    /// J's rgb, w its direction win (octahedral, `pack2x16snorm`); `incoming`'s w counts
-    /// those written. With `incoming` they are the samples of win whose glossy reflections
-    /// the image's senders average (docs/ALGORITHM.md 6).
-    pub earlier: [[u32; 4]; GLOSSY_HISTORY],
+    /// The J_j of the `GLOSSY_HISTORY` bundles before this one, newest first: x J's rgb in
+    /// 32 bits (`pack_history_radiance` in wgsl/common/layout.wgsl: a shared exponent and
+    /// three signed 8-bit mantissas), y its direction win (octahedral, `pack2x16snorm`);
+    /// `incoming`'s w counts those written. With `incoming` they are the samples of win
+    /// whose glossy reflections the transfer and the image's senders average
+    /// (docs/ALGORITHM.md 2.2 and 6).
+    pub earlier: [[u32; 2]; GLOSSY_HISTORY],
 }
 
-/// Earlier steps' J_j kept per patch for the glossy reflection the image gathers
-/// (`GpuPatchState::earlier`; WGSL: `GLOSSY_HISTORY`).
-pub const GLOSSY_HISTORY: usize = 3;
+/// Earlier bundles' J_j kept per patch for the glossy reflection (`GpuPatchState::earlier`;
+/// WGSL: `GLOSSY_HISTORY`): six in the 48 bytes that held three at full precision, so that
+/// with four bundles a step the mean still spans most of two steps' lines
+/// (docs/PERFORMANCE.md, "A longer glossy history").
+pub const GLOSSY_HISTORY: usize = 6;
 
 /// A pinhole camera with the sub-pixel position of this pass's sample. WGSL: `Camera`.
 #[repr(C)]

@@ -66,7 +66,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // average the glossy reflections of these samples of win (docs/ALGORITHM.md 6). Written
     // out, for GLOSSY_HISTORY entries, with no local array (a CPU adapter may keep one in
     // scratch memory). Step 0's entry (the zero state) is shifted in too but never counted.
-    let newest = vec4<u32>(bitcast<vec3<u32>>(old.incoming.rgb), octahedral_pack(old.direction.xyz));
+    let newest = vec2<u32>(pack_history_radiance(old.incoming.rgb), octahedral_pack(old.direction.xyz));
     let written = select(old.incoming.w, min(old.incoming.w + 1.0, f32(GLOSSY_HISTORY)), bundle.use_state != 0u);
     state_set(j, PatchState(
         vec4<f32>(incoming, written),
@@ -74,5 +74,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         vec4<f32>(diffuse, 0.0),
         vec4<f32>(mean_radiance, 0.0),
         sum,
-        array<vec4<u32>, GLOSSY_HISTORY>(newest, old.earlier[0], old.earlier[1])));
+        array<vec2<u32>, GLOSSY_HISTORY>(
+            newest, old.earlier[0], old.earlier[1], old.earlier[2], old.earlier[3], old.earlier[4])));
 }

@@ -109,6 +109,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             if (written > 2u) {
                 glossy += earlier_glossy(m, n, state_at(j).earlier[2], w_out);
             }
+            if (written > 3u) {
+                glossy += earlier_glossy(m, n, state_at(j).earlier[3], w_out);
+            }
+            if (written > 4u) {
+                glossy += earlier_glossy(m, n, state_at(j).earlier[4], w_out);
+            }
+            if (written > 5u) {
+                glossy += earlier_glossy(m, n, state_at(j).earlier[5], w_out);
+            }
             glossy /= f32(1u + written);
         }
         o += 2.0 * m.diffuse.rgb * diffuse + glossy;
@@ -141,6 +150,6 @@ fn glossy_reflection(m: Material, n: vec3<f32>, j: vec3<f32>, w_in: vec3<f32>, w
 }
 
 // The same for an entry of the state's history (PatchState::earlier).
-fn earlier_glossy(m: Material, n: vec3<f32>, e: vec4<u32>, w_out: vec3<f32>) -> vec3<f32> {
-    return glossy_reflection(m, n, bitcast<vec3<f32>>(e.xyz), -octahedral_unpack(e.w), w_out);
+fn earlier_glossy(m: Material, n: vec3<f32>, e: vec2<u32>, w_out: vec3<f32>) -> vec3<f32> {
+    return glossy_reflection(m, n, unpack_history_radiance(e.x), -octahedral_unpack(e.y), w_out);
 }

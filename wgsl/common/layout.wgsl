@@ -42,9 +42,38 @@ struct PatchState {
     diffuse: vec4<f32>,   // rgb K_j = J_j - (|n_j . d| - 1/2) Lbar_j, reflected diffusely
     mean_radiance: vec4<f32>, // rgb Lbar_j, running estimate of the mean incoming radiance
     diffuse_sum: vec4<f32>, // rgb the sum of K_j over the image steps so far, w their number
-    // J_j of the GLOSSY_HISTORY steps before, newest first: xyz bits of J's rgb, w win
-    // (octahedral_pack); the image's senders average their glossy reflections.
-    earlier: array<vec4<u32>, GLOSSY_HISTORY>,
+    // J_j of the GLOSSY_HISTORY bundles before, newest first: x J's rgb
+    // (pack_history_radiance), y win (octahedral_pack); the glossy reflection averages them.
+    earlier: array<vec2<u32>, GLOSSY_HISTORY>,
+}
+
+// An rgb radiance (of either sign per channel) in 32 bits for the glossy history: a shared
+// binary exponent e (8 bits: the largest magnitude within [63.5, 127.5) units of 2^(e-7))
+// and each channel as a signed 8-bit multiple of that unit, rounded to nearest: each
+// within half a unit, the largest channel within 0.8 %. The history's samples vary from step to step, so the
+// rounding is noise of under a per cent against samples that vary by their own size, not a
+// bias. (Three floats and a direction took 16 bytes an entry, this 8: twice the entries in
+// the same state.)
+fn pack_history_radiance(v: vec3<f32>) -> u32 {
+    let largest = max(abs(v.x), max(abs(v.y), abs(v.z)));
+    if (!(largest > 0.0)) {
+        return 0u;
+    }
+    // Where the largest channel would round up to 128 units, the next exponent holds it.
+    let below = frexp(largest).exp;
+    let e = clamp(below + select(0, 1, round(largest * ldexp(1.0, 7 - below)) > 127.0), -120, 127);
+    let q = vec3<i32>(clamp(round(v * ldexp(1.0, 7 - e)), vec3<f32>(-127.0), vec3<f32>(127.0)));
+    var bits = u32(e + 128) << 24u;
+    bits = insertBits(bits, bitcast<u32>(q.x), 0u, 8u);
+    bits = insertBits(bits, bitcast<u32>(q.y), 8u, 8u);
+    return insertBits(bits, bitcast<u32>(q.z), 16u, 8u);
+}
+
+fn unpack_history_radiance(bits: u32) -> vec3<f32> {
+    let word = bitcast<i32>(bits);
+    let q = vec3<i32>(extractBits(word, 0u, 8u), extractBits(word, 8u, 8u), extractBits(word, 16u, 8u));
+    let e = i32(bits >> 24u) - 128;
+    return vec3<f32>(q) * ldexp(1.0, e - 7);
 }
 
 // A unit direction in 32 bits: its octahedral map, two snorm16 (about 1e-4 rad).
