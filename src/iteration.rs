@@ -185,15 +185,20 @@ pub struct BundleNeeds {
 }
 
 /// The bundles a step takes unless told (`--bundles-per-step auto`): four where the image
-/// sets the resolution (its need at least twice the patches'), so that each of four bundles
-/// at half of it still meets the patches' need; one where the patches set it. There, four
-/// bundles at half the resolution would
-/// cross a patch a quarter of a line each (their J spikes four times as high, and every
-/// bundle's reflection passes them on) while the per-patch stages (reflect, finalize, each
-/// triangle's rasterisation) run four times: on the Sierpinski scene (patches 704, image
-/// less) four bundles of 352 took twice the time of a step for no lower error, where the
-/// Cornell box (image 256, patches 70 at 256 x 256) reached a third of the squared error in
-/// 1.5 times the time (docs/PERFORMANCE.md, "Four bundles a step").
+/// sets the resolution (its need at least the patches'), so that the four bundles at half
+/// of it cross the median glossy patch with at least the lines a step that one bundle at
+/// the patches' need would; one where the patches set it. There, four bundles at half the
+/// resolution cross a patch with fewer lines a step (their J spikier, though the glossy
+/// history's seven bundles spread each spike), while the per-patch stages (reflect,
+/// finalize, each triangle's rasterisation) run four times: on the Sierpinski scene at
+/// 256 x 256 (patches 704, image less) four bundles of 352 had 0.83 of the squared error at
+/// 50 steps for 1.2 times the time, so one bundle reached each error first; at its 512 x 512
+/// (image 832) four of 416 had 0.58 of the squared noise for 1.2 times the time; the Cornell
+/// box (image 256, patches 70 at 256 x 256) reached a third of the squared error in 1.5
+/// times the time (docs/PERFORMANCE.md, "Four bundles a step", "A longer glossy history").
+/// (Until the glossy history spanned seven bundles, the image's need had to be twice the
+/// patches': the history then held one step of four bundles, and four bundles of 352 on
+/// Sierpinski had higher error than one of 704.)
 ///
 /// And one where the scene has at least as many patches as the largest view has pixels:
 /// four bundles repeat the per-patch work (the same lines in all, four times the patches
@@ -205,7 +210,7 @@ pub struct BundleNeeds {
 /// in the same time (docs/PERFORMANCE.md, "Diffuse patches need no line a step").
 pub fn auto_bundles_per_step(needs: &BundleNeeds) -> u32 {
     let few_patches = (needs.patch_count as u64) < needs.view_pixels;
-    if needs.image >= 2.0 * needs.patches && few_patches { BUNDLES_PER_STEP } else { 1 }
+    if needs.image >= needs.patches && few_patches { BUNDLES_PER_STEP } else { 1 }
 }
 
 impl BundleNeeds {
@@ -647,7 +652,9 @@ mod tests {
         assert_eq!(auto_bundles_per_step(&needs(70.0, 256.0, 6065)), BUNDLES_PER_STEP, "the Cornell box");
         assert_eq!(auto_bundles_per_step(&needs(0.0, 256.0, 6065)), BUNDLES_PER_STEP, "all diffuse");
         assert_eq!(auto_bundles_per_step(&needs(704.0, 400.0, 22_420)), 1, "the patches set the grid");
-        assert_eq!(auto_bundles_per_step(&needs(200.0, 399.0, 6065)), 1, "the image needs less than twice");
+        assert_eq!(auto_bundles_per_step(&needs(200.0, 199.0, 6065)), 1, "the image needs less");
+        assert_eq!(auto_bundles_per_step(&needs(704.0, 832.0, 22_420)), BUNDLES_PER_STEP, "Sierpinski at 512 x 512");
+        assert_eq!(auto_bundles_per_step(&needs(200.0, 200.0, 6065)), BUNDLES_PER_STEP, "as much");
         assert_eq!(auto_bundles_per_step(&needs(0.0, 640.0, 256 * 256)), 1, "as many patches as pixels");
         assert_eq!(auto_bundles_per_step(&needs(0.0, 640.0, 256 * 256 - 1)), BUNDLES_PER_STEP);
     }

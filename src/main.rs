@@ -128,8 +128,8 @@ pub(crate) struct RenderArgs {
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     window_steps: Option<u32>,
     /// Bundles each step of the iteration draws: 1, 4, or "auto" (the default unless the
-    /// scene sets it: 4 where the image needs at least twice the lines the patches do and
-    /// the patches are fewer than the largest view's pixels, else 1). With 4, each pixel of
+    /// scene sets it: 4 where the image needs at least the lines the patches do and the
+    /// patches are fewer than the largest view's pixels, else 1). With 4, each pixel of
     /// a 2 x 2 block gathers through its own bundle, so that neighbouring pixels' errors are
     /// independent; the automatic --bundle-resolution is halved for them (as many lines a
     /// step).
