@@ -50,10 +50,10 @@ struct PatchState {
 // An rgb radiance (of either sign per channel) in 32 bits for the glossy history: a shared
 // binary exponent e (8 bits: the largest magnitude within [63.5, 127.5) units of 2^(e-7))
 // and each channel as a signed 8-bit multiple of that unit, rounded to nearest: each
-// within half a unit, the largest channel within 0.8 %. The history's samples vary from step to step, so the
-// rounding is noise of under a per cent against samples that vary by their own size, not a
-// bias. (Three floats and a direction took 16 bytes an entry, this 8: twice the entries in
-// the same state.)
+// within half a unit, the largest channel within 0.8 %. The history's samples vary from
+// step to step, so the rounding is noise of under a per cent against samples that vary by
+// their own size, not a bias. (Three floats and a direction took 16 bytes an entry, this
+// 8: twice the entries in the same state.)
 fn pack_history_radiance(v: vec3<f32>) -> u32 {
     let largest = max(abs(v.x), max(abs(v.y), abs(v.z)));
     if (!(largest > 0.0)) {
