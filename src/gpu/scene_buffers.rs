@@ -34,7 +34,8 @@ impl PerPatch {
 /// The patch table (`GpuPatch`), read at random by patch id (image estimate, first shot).
 pub const PATCH_TABLE: PerPatch = PerPatch { what: "the patch table", bytes: size_of::<GpuPatch>() as u64, pages: 8 };
 /// The iteration state (`GpuPatchState`, 128 bytes a patch): 11 pages, as many patches as the
-/// patch table's 8 (11.18 M on lavapipe); reflection then binds 30 storage buffers.
+/// patch table's 8 (11.18 M on lavapipe); reflection then binds 32 storage buffers, as many
+/// as lavapipe allows a stage.
 pub const PATCH_STATE: PerPatch =
     PerPatch { what: "the iteration state", bytes: size_of::<GpuPatchState>() as u64, pages: 11 };
 /// O_j and what the image gathers (vec4 each), read at random by the transfer and the image.
