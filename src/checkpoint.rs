@@ -114,11 +114,13 @@ impl Checkpoint {
         };
         // The state's float fields; the glossy history's entries are packed bits, which read
         // as floats may look like anything.
-        let state: Vec<GpuPatchState> = bytemuck::pod_collect_to_vec(&self.state);
-        let finite = |s: &GpuPatchState| {
+        // Patch by patch from the bytes (a copy of the whole state would double a large
+        // scene's memory at resume).
+        let finite = |bytes: &[u8]| {
+            let s: GpuPatchState = bytemuck::pod_read_unaligned(bytes);
             [s.incoming, s.direction, s.diffuse, s.mean_radiance, s.diffuse_sum].iter().flatten().all(|v| v.is_finite())
         };
-        if !state.iter().all(finite) {
+        if !self.state.chunks_exact(size_of::<GpuPatchState>()).all(finite) {
             return Err(corrupt(path, "its iteration state holds numbers that are not finite"));
         }
         let Some(image_steps) = self.step.checked_sub(burn_in).filter(|&n| n > 0) else {
