@@ -3,19 +3,19 @@
 //! every patch, the image sum (its two halves) and the step count: step k's random numbers
 //! depend only on (seed, k), so no generator state needs saving.
 //!
-//! File layout (little endian): magic "FSCKPT05" (01: before the state's running means and
+//! File layout (little endian): magic "FSCKPT06" (01: before the state's running means and
 //! the image sum's two halves; 02: before the state's glossy history; 03: before the
 //! emission a pixel sees moved from the image sum's first half to its second; 04: before
-//! the glossy history's six packed entries in place of three), fingerprint u64, step u32, state length
-//! u64, image-sum length u64, the two byte arrays, then an FNV-1a 64 checksum of all that
-//! precedes it.
+//! the glossy history's six packed entries in place of three; 05: before its ten, with the
+//! direction packed beside K_j), fingerprint u64, step u32, state length u64, image-sum
+//! length u64, the two byte arrays, then an FNV-1a 64 checksum of all that precedes it.
 
 use crate::{Error, Result};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"FSCKPT05";
+const MAGIC: &[u8; 8] = b"FSCKPT06";
 /// Earlier versions' magics, refused with a word on why.
-const OLDER_MAGICS: [&[u8; 8]; 4] = [b"FSCKPT01", b"FSCKPT02", b"FSCKPT03", b"FSCKPT04"];
+const OLDER_MAGICS: [&[u8; 8]; 5] = [b"FSCKPT01", b"FSCKPT02", b"FSCKPT03", b"FSCKPT04", b"FSCKPT05"];
 
 /// The iteration state after `step` steps.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -112,13 +112,13 @@ impl Checkpoint {
         let floats = |bytes: &[u8]| -> Vec<f32> {
             bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
         };
-        // The state's float fields; the glossy history's entries are packed bits, which read
-        // as floats may look like anything.
+        // The state's float fields; the direction and the glossy history's entries are packed
+        // bits, which read as floats may look like anything.
         // Patch by patch from the bytes (a copy of the whole state would double a large
         // scene's memory at resume).
         let finite = |bytes: &[u8]| {
             let s: GpuPatchState = bytemuck::pod_read_unaligned(bytes);
-            [s.incoming, s.direction, s.diffuse, s.mean_radiance, s.diffuse_sum].iter().flatten().all(|v| v.is_finite())
+            [s.incoming, s.mean_radiance, s.diffuse_sum].iter().flatten().chain(&s.diffuse).all(|v| v.is_finite())
         };
         if !self.state.chunks_exact(size_of::<GpuPatchState>()).all(finite) {
             return Err(corrupt(path, "its iteration state holds numbers that are not finite"));
@@ -197,8 +197,8 @@ mod tests {
         // floats would be NaN (a run writes such bits: they are not floats).
         let patch = crate::layout::GpuPatchState {
             incoming: [0.5; 4],
-            direction: [0.0, 1.0, 0.0, 0.0],
-            diffuse: [0.5; 4],
+            diffuse: [0.5; 3],
+            direction: 0xffff_ffff,
             mean_radiance: [0.5; 4],
             diffuse_sum: [1.0; 4],
             earlier: [[0x7fc0_0001, 0xffff_ffff]; crate::layout::GLOSSY_HISTORY],

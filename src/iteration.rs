@@ -3,7 +3,7 @@
 //! `StepRng(seed, k)`, so the state between steps is only J_j, win_j and the image sum.
 
 use crate::gpu::profile::Stage;
-use crate::gpu::scene_buffers::{OUTGOING, Paged, SceneBuffers, TRANSFER_SUMS};
+use crate::gpu::scene_buffers::{IMAGE_SENDERS, OUTGOING, Paged, SceneBuffers, TRANSFER_SUMS};
 use crate::gpu::{Context, buffers};
 use crate::layout::{GpuBundle, LINE_BUCKET};
 use crate::rng::StepRng;
@@ -127,7 +127,7 @@ pub const AUTO_BUNDLE_LINE_PIXELS: f64 = 1.5;
 ///   on most steps and a multiple of its true value on the others: the spikes the image's
 ///   gather then reflects from a glossy patch, which sends the image its last few steps' J.
 ///   A diffuse patch sends the image the mean of its K_j over the image steps
-///   (`bundle_reflect`'s image_outgoing), where one step's spike is one sample among many.
+///   (`bundle_reflect`'s image_senders), where one step's spike is one sample among many.
 ///   The rule gives the glossy patch of median area (`is_glossy`) one line per step on
 ///   average, r >= 2 radius sqrt(2 / A_median), where glossy patches fill at least
 ///   `GLOSSY_SHARE` of what the views see; otherwise (walls of fine mesh triangles, a
@@ -189,10 +189,11 @@ pub struct BundleNeeds {
 /// of it cross the median glossy patch with at least the lines a step that one bundle at
 /// the patches' need would; one where the patches set it. There, four bundles at half the
 /// resolution cross a patch with fewer lines a step (their J spikier, though the glossy
-/// history's seven bundles spread each spike), while the per-patch stages (reflect,
+/// history spreads each spike over eleven bundles), while the per-patch stages (reflect,
 /// finalize, each triangle's rasterisation) run four times: on the Sierpinski scene at
 /// 256 x 256 (patches 704, image less) four bundles of 352 had 0.83 of the squared error at
-/// 50 steps for 1.2 times the time, so one bundle reached each error first; at its 512 x 512
+/// 50 steps for 1.2 times the time (0.79 with the history of eleven bundles), so one bundle
+/// reached each error first; at its 512 x 512
 /// (image 832) four of 416 had 0.58 of the squared noise for 1.2 times the time; the Cornell
 /// box (image 256, patches 70 at 256 x 256) reached a third of the squared error in 1.5
 /// times the time (docs/PERFORMANCE.md, "Four bundles a step", "A longer glossy history").
@@ -346,7 +347,7 @@ pub fn fragment_bound(patches: &Patches, radius: f64, resolution: u32) -> u64 {
 }
 
 /// What the image estimate reads of a step to gather per pixel: the bundle, its sorted
-/// lines (offsets and fragments) and what each patch sends the image (`image_outgoing` of
+/// lines (offsets and fragments) and what each patch sends the image (`image_senders` of
 /// `bundle_reflect`).
 pub struct GatherBuffers {
     pub bundle: wgpu::Buffer,
@@ -355,10 +356,9 @@ pub struct GatherBuffers {
     pub counts: wgpu::Buffer,
     pub slices: wgpu::Buffer,
     pub fragments: wgpu::Buffer,
-    /// Its pages (`scene_buffers::OUTGOING`).
-    pub image_outgoing: Vec<wgpu::Buffer>,
-    /// Lbar_j before this step (`bundle_reflect`'s image_mean_radiance), in pages.
-    pub image_mean_radiance: Vec<wgpu::Buffer>,
+    /// What each patch sends the image and its Lbar_j before this step (`GpuImageSender`),
+    /// in pages (`scene_buffers::IMAGE_SENDERS`).
+    pub image_senders: Vec<wgpu::Buffer>,
 }
 
 /// The buffers and stages of a step.
@@ -391,8 +391,7 @@ pub struct Iteration {
 struct StepArrays {
     /// O_j, what each patch sends into this step's bundle.
     outgoing: Paged,
-    image_outgoing: Paged,
-    image_mean_radiance: Paged,
+    image_senders: Paged,
     /// The transfer's fixed-point sums.
     sums: Paged,
 }
@@ -414,8 +413,7 @@ impl Iteration {
         let (pages, zeroed) = (scene.page_bytes, Paged::zeroed);
         let arrays = StepArrays {
             outgoing: zeroed(device, "firstshot.iteration.outgoing", OUTGOING, n, pages, none),
-            image_outgoing: zeroed(device, "firstshot.iteration.image_outgoing", OUTGOING, n, pages, none),
-            image_mean_radiance: zeroed(device, "firstshot.iteration.image_mean_radiance", OUTGOING, n, pages, none),
+            image_senders: zeroed(device, "firstshot.iteration.image_senders", IMAGE_SENDERS, n, pages, none),
             sums: zeroed(device, "firstshot.iteration.sums", TRANSFER_SUMS, n, pages, none),
         };
         Self::with_arrays(ctx, scene, arrays, resolution, capacity, image_first_bounce_per_point, None)
@@ -454,7 +452,8 @@ impl Iteration {
         let bundle = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("firstshot.iteration.bundle"),
             size: std::mem::size_of::<GpuBundle>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            // STORAGE: `bundle_reflect` reads it as a storage buffer (its SPEC says why).
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let step_bundles = device.create_buffer(&wgpu::BufferDescriptor {
@@ -463,7 +462,7 @@ impl Iteration {
             usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let StepArrays { outgoing, image_outgoing, image_mean_radiance, sums } = &arrays;
+        let StepArrays { outgoing, image_senders, sums } = &arrays;
         let max_bits = buffers::storage_zeroed(device, "firstshot.iteration.max_bits", 16, none);
         // COPY_SRC: `fragments` sums the counts on the host.
         let counts = buffers::storage_zeroed(
@@ -490,12 +489,7 @@ impl Iteration {
                 scene,
                 &bundle,
                 &max_bits,
-                ReflectOutputs {
-                    outgoing,
-                    image_outgoing,
-                    image_mean_radiance,
-                    writes_first_bounce: image_first_bounce_per_point,
-                },
+                ReflectOutputs { outgoing, image_senders, writes_first_bounce: image_first_bounce_per_point },
                 like.map(|l| &l.reflect),
             ),
             visibility: BundleVisibility::new(
@@ -551,8 +545,7 @@ impl Iteration {
                 counts: counts.clone(),
                 slices,
                 fragments: fragments.clone(),
-                image_outgoing: image_outgoing.pages.clone(),
-                image_mean_radiance: image_mean_radiance.pages.clone(),
+                image_senders: image_senders.pages.clone(),
             },
             image_first_bounce_per_point,
             bundle,

@@ -155,11 +155,14 @@ pub struct GpuLightSample {
 pub struct GpuPatchState {
     /// rgb: J_j; w: how many of `earlier` hold a step's J (at most `GLOSSY_HISTORY`).
     pub incoming: [f32; 4],
-    /// xyz: win_j, the direction of travel of that light (unit); zero before step 1.
-    pub direction: [f32; 4],
-    /// rgb: K_j = J_j - (|n_j . d| - 1/2) Lbar_j, J_j with its control variate: what the
-    /// patch reflects diffusely (docs/ALGORITHM.md 2.4).
-    pub diffuse: [f32; 4],
+    /// K_j = J_j - (|n_j . d| - 1/2) Lbar_j, J_j with its control variate: what the patch
+    /// reflects diffusely (docs/ALGORITHM.md 2.4).
+    pub diffuse: [f32; 3],
+    /// win_j, the direction of travel of J_j's light (unit), as its octahedral map in 32
+    /// bits (`octahedral_pack` in wgsl/common/layout.wgsl, two snorm16: about 1e-4 rad),
+    /// the form the history keeps it in; 0 before step 1. In the 4 bytes beside `diffuse`,
+    /// not a vec4 of its own: 16 bytes a patch less, which the longer history took.
+    pub direction: u32,
     /// rgb: Lbar_j, a running estimate of the mean radiance arriving at the patch (the
     /// control variate's weight).
     pub mean_radiance: [f32; 4],
@@ -176,10 +179,26 @@ pub struct GpuPatchState {
 }
 
 /// Earlier bundles' J_j kept per patch for the glossy reflection (`GpuPatchState::earlier`;
-/// WGSL: `GLOSSY_HISTORY`): six in the 48 bytes that held three at full precision, so that
-/// with four bundles a step the mean still spans most of two steps' lines
-/// (docs/PERFORMANCE.md, "A longer glossy history").
-pub const GLOSSY_HISTORY: usize = 6;
+/// WGSL: `GLOSSY_HISTORY`): ten packed entries, so that the mean spans eleven bundles
+/// (with four bundles a step, most of three steps' lines); six had 8 % more squared error
+/// on the Sierpinski scene (docs/PERFORMANCE.md, "A longer glossy history").
+pub const GLOSSY_HISTORY: usize = 10;
+
+/// What a patch sends the image's gather in a step, written by `bundle_reflect` and read by
+/// the image estimate at random by patch id; one array (`scene_buffers::IMAGE_SENDERS`) so
+/// that it takes as few storage bindings as it can. WGSL: `ImageSender`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuImageSender {
+    /// rgb: what the image gathers from the patch (its diffuse reflection of the mean J of
+    /// the image steps so far, with the glossy part and the first shot's); w: s_j, or,
+    /// where the image evaluates near senders' first bounce per point, the largest channel
+    /// of Lfs_j (`pack_first_bounce` in wgsl/bundle_reflect.wgsl).
+    pub outgoing: [f32; 4],
+    /// rgb: Lbar_j as this step found it, before finalize updates it: the control variate
+    /// of the gather at the patch's own pixels; w: 0, or the other two channels of Lfs_j.
+    pub mean_radiance: [f32; 4],
+}
 
 /// A pinhole camera with the sub-pixel position of this pass's sample. WGSL: `Camera`.
 #[repr(C)]
@@ -350,6 +369,7 @@ assert_size_multiple_of_16!(
     GpuMaterial,
     GpuLightSample,
     GpuPatchState,
+    GpuImageSender,
     GpuCamera,
     GpuEstimateParams,
     GpuDirectLight,
@@ -375,7 +395,8 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuPatch => "Patch" { v0, v1, v2, normal, emission, material, flags, light_pick_area, piece }),
         layout!(GpuMaterial => "Material" { diffuse, specular, kind, glossy_control }),
         layout!(GpuLightSample => "LightSample" { position, normal, strength, kind, cone_scale, cone_offset }),
-        layout!(GpuPatchState => "PatchState" { incoming, direction, diffuse, mean_radiance, diffuse_sum, earlier }),
+        layout!(GpuPatchState => "PatchState" { incoming, diffuse, direction, mean_radiance, diffuse_sum, earlier }),
+        layout!(GpuImageSender => "ImageSender" { outgoing, mean_radiance }),
         layout!(GpuCamera => "Camera" { eye, right, up, forward, jitter, size }),
         layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count, mis, first_row }),
         layout!(GpuDirectLight => "DirectLight" { position, normal, strength, cone, kind, first_face, faces }),

@@ -14,13 +14,10 @@ use serde::Serialize;
 
 /// GPU bytes per patch besides the paged arrays: the triangles (at most one a patch: 3
 /// `RasterVertex` and 3 lattice words, `scene_buffers::raster_triangles`), the
-/// first-shot row starts (4), the copy of the state kept to redo a batch of steps
-/// (`GpuPatchState`), and the two further arrays of the outgoing radiance's kind that the
-/// image reads (`iteration`: image_outgoing and image_mean_radiance).
-const OTHER_DEVICE_BYTES_PER_PATCH: u64 = 3 * RASTER_VERTEX_BYTES
-    + 4
-    + size_of::<crate::layout::GpuPatchState>() as u64
-    + 2 * crate::gpu::scene_buffers::OUTGOING.bytes;
+/// first-shot row starts (4) and the copy of the state kept to redo a batch of steps
+/// (`GpuPatchState`).
+const OTHER_DEVICE_BYTES_PER_PATCH: u64 =
+    3 * RASTER_VERTEX_BYTES + 4 + size_of::<crate::layout::GpuPatchState>() as u64;
 /// GPU bytes per patch while the first shot runs: its 64-bit sums (8), row counts (4), fill
 /// cursors (4) and prefix-sum scratch (4).
 const FIRST_SHOT_BYTES_PER_PATCH: u64 = 20;

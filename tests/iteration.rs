@@ -311,13 +311,20 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
                 let err = (back - sent as f64).abs();
                 assert!(err <= 0.5 * unit * (1.0 + 1e-6), "patch {j} entry {i}: J {c} {sent} comes back {back}");
             }
-            let d = DVec3::new(before.direction[0] as f64, before.direction[1] as f64, before.direction[2] as f64);
-            let err = (unpack_octahedral(e[1]) - d).length();
-            assert!(err < 2e-4, "patch {j} entry {i}: direction {d} comes back {err} off");
+            // The state keeps win_j packed as the history does: the entry takes its bits.
+            assert_eq!(e[1], before.direction, "patch {j} entry {i}: the direction's bits");
             moved += (before.incoming[0] != 0.0) as usize;
         }
     }
     assert!(moved > last.len(), "the furnace's patches receive light ({moved})");
+    // Each state's win_j is -s_j d of its step's one bundle: the same direction up to its
+    // sign on every patch, to the packing's 1e-4 rad.
+    for (n, state) in (1..=runs).zip(&states) {
+        let d = unpack_octahedral(state[0].direction);
+        assert!((d.length() - 1.0).abs() < 1e-6, "after {n} steps: win_0 {d}");
+        let worst = state.iter().map(|s| 1.0 - unpack_octahedral(s.direction).dot(d).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-7, "after {n} steps the patches' win_j are not one bundle's direction ({worst})");
+    }
     // The reflection reads every entry: its unrolled sum has one term per entry.
     let reflect = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/wgsl/bundle_reflect.wgsl")).unwrap();
     assert_eq!(

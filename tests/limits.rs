@@ -161,7 +161,7 @@ fn test04_hand_made_patches() {
         ..Default::default()
     };
     let options = RenderOptions { width: 2, height: 2, iterations: 0, ..cornell_box().1 };
-    // A page holds one patch at least: the largest per-patch element (the state's 128 bytes;
+    // A page holds one patch at least: the largest per-patch element (the state's 144 bytes;
     // the patch table's 96 and the triangles' 96 are smaller) fits, a byte less holds none.
     let patch = size_of::<GpuPatchState>() as u64;
     assert_eq!(PAGED_ARRAYS.iter().map(|a| a.bytes).max(), Some(patch));

@@ -7,7 +7,7 @@ mod common;
 
 use firstshot::checkpoint::Checkpoint;
 use firstshot::gpu::scene_buffers::{
-    FIRST_SHOT_PAIRS, OUTGOING, PAGED_ARRAYS, PATCH_STATE, PATCH_TABLE, TRANSFER_SUMS,
+    FIRST_SHOT_PAIRS, IMAGE_SENDERS, OUTGOING, PAGED_ARRAYS, PATCH_STATE, PATCH_TABLE, TRANSFER_SUMS,
 };
 use firstshot::image::Image;
 use firstshot::render::{Hooks, RenderOptions, Rendered, render_with};
@@ -49,14 +49,16 @@ fn test01_paged_per_patch_arrays_give_the_same_bits() {
     let patches = scene::tessellate(&scene, options.patch_size).unwrap();
     let n = patches.patches.len() as u64;
     assert!(n > 100, "{n} patches");
-    // Pages of 12 bytes a patch and a little: the patch table and the state take 8 and 11 pages,
-    // the vec4 arrays and the transfer sums 2, so that every paged array has a page past the
-    // first and the 8-page ones most of theirs.
-    let page = 12 * n + 96;
+    // Pages of 13.4 bytes a patch and a little: the patch table (96 bytes a patch) and the
+    // state (144) take 8 and 11 pages, the image's senders 3, the vec4 arrays and the
+    // transfer sums 2, so that every paged array has a page past the first and the 8-page
+    // ones most of theirs.
+    let page = 67 * n / 5 + 96;
     let pages = |a: firstshot::gpu::scene_buffers::PerPatch| n.div_ceil(a.patches_per_page(page));
     assert_eq!(pages(PATCH_TABLE), 8);
     assert_eq!(pages(PATCH_STATE), 11);
     assert_eq!(pages(OUTGOING), 2);
+    assert_eq!(pages(IMAGE_SENDERS), 3);
     assert_eq!(pages(TRANSFER_SUMS), 2);
     assert!(PAGED_ARRAYS.iter().all(|&a| pages(a) >= 2 && pages(a) <= a.pages as u64));
     // The first shot's pairs (4 to 5 a patch) take 5 or 6 of their 8 pages.

@@ -45,9 +45,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // mean for any Lbar_j drawn before d, and where the incoming radiance is close to
     // Lbar_j (the bulk of indirect light) nearly none of the factor's variance, which
     // otherwise multiplies from step to step (unbounded variance once albedo > 0.87).
-    let old = state_at(j);
+    // Field by field: a CPU adapter loads every field of a whole-struct read, and the
+    // history's entries are only moved.
+    let old_incoming = state_at(j).incoming;
+    let old_mean_radiance = state_at(j).mean_radiance.rgb;
     let cos_d = abs(dot(patches_at(j).normal.xyz, bundle.direction.xyz));
-    let diffuse = incoming - (cos_d - 0.5) * old.mean_radiance.rgb;
+    let diffuse = incoming - (cos_d - 0.5) * old_mean_radiance;
     // A patch smaller than a line's pixel (dP / A_j > 1) is crossed by no line or by one
     // weighing dP / A_j times its share: its J spikes. Its weight shrinks by A_j / dP, so
     // that a spike moves Lbar_j by a bounded amount (the weight times 2 dP / A_j times the
@@ -56,9 +59,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // keeps them unbiased; a spiked Lbar_j gave the image's first steps pixels of +-50 where
     // the radiance is 0.2 (a Cornell box sliver at bundle 64).
     let weight = MEAN_RADIANCE_WEIGHT * min(1.0, 1.0 / factor);
-    let mean_radiance = mix(old.mean_radiance.rgb, 2.0 * diffuse, weight);
+    let mean_radiance = mix(old_mean_radiance, 2.0 * diffuse, weight);
     // Past the burn-in, K joins the running sum whose mean the image's senders reflect.
-    var sum = old.diffuse_sum;
+    var sum = state_at(j).diffuse_sum;
     if (bundle.image_step != 0u) {
         sum += vec4<f32>(diffuse, 1.0);
     }
@@ -66,14 +69,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // average the glossy reflections of these samples of win (docs/ALGORITHM.md 6). Written
     // out, for GLOSSY_HISTORY entries, with no local array (a CPU adapter may keep one in
     // scratch memory). Step 0's entry (the zero state) is shifted in too but never counted.
-    let newest = vec2<u32>(pack_history_radiance(old.incoming.rgb), octahedral_pack(old.direction.xyz));
-    let written = select(old.incoming.w, min(old.incoming.w + 1.0, f32(GLOSSY_HISTORY)), bundle.use_state != 0u);
+    let newest = vec2<u32>(pack_history_radiance(old_incoming.rgb), state_at(j).direction);
+    let written = select(old_incoming.w, min(old_incoming.w + 1.0, f32(GLOSSY_HISTORY)), bundle.use_state != 0u);
     state_set(j, PatchState(
         vec4<f32>(incoming, written),
-        vec4<f32>(-side * bundle.direction.xyz, 0.0),
-        vec4<f32>(diffuse, 0.0),
+        diffuse,
+        octahedral_pack(-side * bundle.direction.xyz),
         vec4<f32>(mean_radiance, 0.0),
         sum,
         array<vec2<u32>, GLOSSY_HISTORY>(
-            newest, old.earlier[0], old.earlier[1], old.earlier[2], old.earlier[3], old.earlier[4])));
+            newest, state_at(j).earlier[0], state_at(j).earlier[1], state_at(j).earlier[2], state_at(j).earlier[3],
+            state_at(j).earlier[4], state_at(j).earlier[5], state_at(j).earlier[6], state_at(j).earlier[7],
+            state_at(j).earlier[8])));
 }

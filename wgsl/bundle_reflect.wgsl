@@ -4,7 +4,7 @@
 // glossy sum over the h <= GLOSSY_HISTORY + 1 latest J_j with their directions), with Le
 // left out for first-shot lights (their first reflection replaces them); the same with the
 // mean of K_j over the image steps in place of K_j, which the image gathers
-// (`image_outgoing`, docs/ALGORITHM.md 6); where the image evaluates near senders' first
+// (`image_senders`, docs/ALGORITHM.md 6); where the image evaluates near senders' first
 // bounce per point, Lfs_j alone (`pack_first_bounce`); and the largest |O| of the step (for
 // the fixed-point scale of the transfer).
 //
@@ -15,20 +15,21 @@
 // Host: src/stages/bundle_reflect.rs. Its `SPEC` is the one statement of the bindings (names,
 // kinds, access) and workgroup sizes; tests/kernel_bindings.rs holds it against this file.
 
-@group(0) @binding(0) var<uniform> bundle: Bundle;
+// The step's bundle as a storage buffer: as a uniform, lavapipe compiled this kernel again
+// at every step of a new seed (src/stages/bundle_reflect.rs says why).
+@group(0) @binding(0) var<storage, read> bundle: Bundle;
 @group(0) @binding(1) var<storage, read> patches: array<Patch>;
 @group(0) @binding(2) var<storage, read> materials: array<Material>;
 @group(0) @binding(3) var<storage, read> state: array<PatchState>;
 @group(0) @binding(4) var<storage, read_write> outgoing: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> max_bits: atomic<u32>;
-@group(0) @binding(6) var<storage, read_write> image_outgoing: array<vec4<f32>>;
-@group(0) @binding(7) var<storage, read_write> image_mean_radiance: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> image_senders: array<ImageSender>;
 
 // True where the image's gather evaluates a near sender's first reflection of the
 // first-shot lights per point (image_estimate's FIRST_BOUNCE_PER_POINT): it then needs the
-// patch-level Lfs_j that image_outgoing holds, to take it out. Lfs_j rides in the w slots of
-// image_outgoing and image_mean_radiance, which nothing else reads (`pack_first_bounce`):
-// an array of its own took two more storage bindings a page, past lavapipe's 32.
+// patch-level Lfs_j that image_senders' outgoing holds, to take it out. Lfs_j rides in the
+// w slots of an ImageSender, which nothing else reads (`pack_first_bounce`): an array of its
+// own took more storage bindings, past lavapipe's 32.
 override IMAGE_FIRST_BOUNCE: bool = false;
 
 // Lfs (non-negative) as two floats: its largest channel exactly, and, as an integer below
@@ -96,7 +97,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         var glossy = vec3<f32>(0.0);
         if (m.kind == MATERIAL_PHONG) {
             let incoming = state_at(j).incoming;
-            glossy = glossy_reflection(m, n, incoming.rgb, -state_at(j).direction.xyz, w_out);
+            glossy = glossy_reflection(m, n, incoming.rgb, -octahedral_unpack(state_at(j).direction), w_out);
             // Unrolled, for GLOSSY_HISTORY entries: a CPU adapter runs a data-dependent loop
             // many times slower.
             let written = u32(incoming.w);
@@ -118,6 +119,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             if (written > 5u) {
                 glossy += earlier_glossy(m, n, state_at(j).earlier[5], w_out);
             }
+            if (written > 6u) {
+                glossy += earlier_glossy(m, n, state_at(j).earlier[6], w_out);
+            }
+            if (written > 7u) {
+                glossy += earlier_glossy(m, n, state_at(j).earlier[7], w_out);
+            }
+            if (written > 8u) {
+                glossy += earlier_glossy(m, n, state_at(j).earlier[8], w_out);
+            }
+            if (written > 9u) {
+                glossy += earlier_glossy(m, n, state_at(j).earlier[9], w_out);
+            }
             glossy /= f32(1u + written);
         }
         o += 2.0 * m.diffuse.rgb * diffuse + glossy;
@@ -132,10 +145,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (IMAGE_FIRST_BOUNCE) {
         packed = pack_first_bounce(first_bounce);
     }
-    image_outgoing_set(j, vec4<f32>(image_o, packed.x));
-    // Lbar_j as it stands before this step's d (finalize updates it with this step's J):
+    // With Lbar_j as it stands before this step's d (finalize updates it with this step's J):
     // the gather's control variate at j's own pixels.
-    image_mean_radiance_set(j, vec4<f32>(mean_radiance, packed.y));
+    image_senders_set(j, ImageSender(vec4<f32>(image_o, packed.x), vec4<f32>(mean_radiance, packed.y)));
     let largest = abs(o);
     atomicMax(&max_bits, bitcast<u32>(max(largest.r, max(largest.g, largest.b))));
 }

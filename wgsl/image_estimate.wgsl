@@ -15,7 +15,7 @@
 // The gather: x projected onto the bundle's grid gives its line; along it, in x's front
 // direction s d, the nearest surface m (by the exact distance along the ray from x to m's
 // plane, among the fragments of the line near x) sends what it sends the image
-// (`image_outgoing` of bundle_reflect) if its front faces x, black if its back does; the
+// (`image_senders` of bundle_reflect) if its front faces x, black if its back does; the
 // environment if there is none.
 //
 // The image sum has two halves, each a running sum (rgb) and count (w) per pixel: D (entry
@@ -47,12 +47,11 @@
 @group(1) @binding(1) var<storage, read> faces: array<WindowFace>;
 @group(1) @binding(2) var kept_atlas: texture_2d<u32>;
 @group(1) @binding(3) var pass_atlas: texture_2d<u32>;
-@group(2) @binding(0) var<uniform> bundle: Bundle;
+@group(2) @binding(0) var<storage, read> bundle: Bundle;
 @group(2) @binding(1) var<storage, read> counts: array<u32>;
 @group(2) @binding(2) var<storage, read> slices: array<vec2<u32>>;
 @group(2) @binding(3) var<storage, read> fragments: array<vec2<u32>>;
-@group(2) @binding(4) var<storage, read> image_outgoing: array<vec4<f32>>;
-@group(2) @binding(5) var<storage, read> image_mean_radiance: array<vec4<f32>>;
+@group(2) @binding(4) var<storage, read> image_senders: array<ImageSender>;
 
 // The kinds of light (bit 1 << LIGHT_*) and of window (bit 1 << its face count) that the
 // light table holds: the host builds the `direct` pipeline with them
@@ -457,9 +456,9 @@ fn sender_point(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec4<f32> {
 const NEAR_SENDER: f32 = 2.0;
 
 // What x receives along `toward` (= s d): `radiance`, what the sender's patch sends the image
-// (`image_outgoing`, with G's share of an emitting shape's light), black or the environment;
-// `decided` false where `own_received` leaves it to `nearest_received`; `sender` the patch
-// id (index + 1) whose front sends it, NO_PATCH if none.
+// (`ImageSender::outgoing`, with G's share of an emitting shape's light), black or the
+// environment; `decided` false where `own_received` leaves it to `nearest_received`;
+// `sender` the patch id (index + 1) whose front sends it, NO_PATCH if none.
 struct Received {
     radiance: vec3<f32>,
     decided: bool,
@@ -467,7 +466,7 @@ struct Received {
 }
 
 fn received_from(m: u32, x: vec3<f32>, toward: vec3<f32>) -> Received {
-    return Received(image_outgoing_at(m).rgb + emitted_share(m, x, toward), true, m + 1u);
+    return Received(image_senders_at(m).outgoing.rgb + emitted_share(m, x, toward), true, m + 1u);
 }
 
 fn received_const(radiance: vec3<f32>, decided: bool) -> Received {
@@ -770,7 +769,7 @@ fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLin
         return received_const(vec3<f32>(0.0), false);
     }
     if (best.patch_id == NO_PATCH) {
-        return received_const(image_mean_radiance_at(j).rgb, true);
+        return received_const(image_senders_at(j).mean_radiance.rgb, true);
     }
     let m = best.patch_id - 1u;
     return received_from(m, x, toward);
@@ -870,7 +869,7 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
     // 2 pi (kd / pi) |n . d| L, because |n . d| has mean 1/2 over x's hemisphere and
     // Lbar_j was drawn before d; where L is near Lbar_j (the bulk of the indirect light)
     // it has almost none of the variance of the factor |n . d|.
-    let mean = image_mean_radiance_at(at.j).rgb;
+    let mean = image_senders_at(at.j).mean_radiance.rgb;
     var radiance = 2.0 * m.diffuse.rgb * (cos_d * incoming - (cos_d - 0.5) * mean);
     if (GLOSSY && m.kind == MATERIAL_PHONG) {
         // The glossy part likewise: 2 pi |n . d| f_glossy(-s d, w_out) has the mean
@@ -1045,8 +1044,8 @@ fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_work
     }
 }
 
-// The patch-level Lfs_m that bundle_reflect packed into the w slots of image_outgoing (`top`)
-// and image_mean_radiance (`rest`): `pack_first_bounce` there.
+// The patch-level Lfs_m that bundle_reflect packed into the w slots of image_senders'
+// outgoing (`top`) and mean_radiance (`rest`): `pack_first_bounce` there.
 fn unpack_first_bounce(top: f32, rest: f32) -> vec3<f32> {
     let bits = u32(rest);
     let others = vec2<f32>(f32((bits >> 11u) & 2047u), f32(bits & 2047u)) * (top / 2047.0);
@@ -1082,14 +1081,14 @@ fn first_bounce_correction(at: Seen, m: u32, toward: vec3<f32>) -> vec3<f32> {
     let y = sender_point(m, at.x, toward).xyz;
     let n = patches_at(m).normal.xyz;
     let per_point = direct_light(m, y, n, materials[patches_at(m).material], -toward);
-    let lfs = unpack_first_bounce(image_outgoing_at(m).w, image_mean_radiance_at(m).w);
+    let lfs = unpack_first_bounce(image_senders_at(m).outgoing.w, image_senders_at(m).mean_radiance.w);
     return gather_weight(at, toward) * (per_point - lfs);
 }
 
 // For the pixels `gather` and `gather_edges` listed in `near_senders` (a near sender m):
 // G with m's first reflection of the lights at the point y that x's ray meets, with y's own
 // visibility of each light, D(y, -toward), in place of the patch-level Lfs_m that `gather`
-// took with image_outgoing (docs/ALGORITHM.md 6, "Near senders' first bounce per point").
+// took with image_senders (docs/ALGORITHM.md 6, "Near senders' first bounce per point").
 // G is linear in what arrives, so the difference times G's weight is added, with no count.
 // Its own pass: inlined in the gather, the direct light's code made every pixel's gather
 // three times as long on lavapipe, though few pixels need it.

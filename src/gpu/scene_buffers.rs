@@ -33,13 +33,18 @@ impl PerPatch {
 
 /// The patch table (`GpuPatch`), read at random by patch id (image estimate, first shot).
 pub const PATCH_TABLE: PerPatch = PerPatch { what: "the patch table", bytes: size_of::<GpuPatch>() as u64, pages: 8 };
-/// The iteration state (`GpuPatchState`, 128 bytes a patch): 11 pages, as many patches as the
-/// patch table's 8 (11.18 M on lavapipe); reflection then binds 32 storage buffers, as many
-/// as lavapipe allows a stage.
+/// The iteration state (`GpuPatchState`, 144 bytes a patch): 11 pages (10.25 M patches on
+/// lavapipe, fewer than the patch table's 11.18 M); reflection then binds 32 storage buffers,
+/// as many as lavapipe allows a stage, so a twelfth page would need a binding less there.
 pub const PATCH_STATE: PerPatch =
     PerPatch { what: "the iteration state", bytes: size_of::<GpuPatchState>() as u64, pages: 11 };
-/// O_j and what the image gathers (vec4 each), read at random by the transfer and the image.
+/// O_j (vec4), read at random by the transfer.
 pub const OUTGOING: PerPatch = PerPatch { what: "the outgoing radiance", bytes: 16, pages: 2 };
+/// What each patch sends the image (`GpuImageSender`, 32 bytes), read at random by the
+/// image's gather: one array in 3 pages where two of 16 bytes took 4, which made room in
+/// reflection's 32 bindings for its bundle as a storage buffer (`bundle_reflect::SPEC`).
+pub const IMAGE_SENDERS: PerPatch =
+    PerPatch { what: "the image's senders", bytes: size_of::<GpuImageSender>() as u64, pages: 3 };
 /// The transfer's signed 64-bit fixed-point sums (3 x 2 u32), added to at random.
 pub const TRANSFER_SUMS: PerPatch = PerPatch { what: "the transfer sums", bytes: 24, pages: 2 };
 /// The first shot's irradiance per patch (vec4).
@@ -53,7 +58,8 @@ pub const FIRST_SHOT_IRRADIANCE: PerPatch = PerPatch { what: "the first-shot irr
 /// the pairs (`memory::max_pairs`: 16.7 M on lavapipe).
 pub const FIRST_SHOT_PAIRS: PerPatch = PerPatch { what: "the first-shot pair list", bytes: 16, pages: 8 };
 /// Every paged per-patch array.
-pub const PAGED_ARRAYS: &[PerPatch] = &[PATCH_TABLE, PATCH_STATE, OUTGOING, TRANSFER_SUMS, FIRST_SHOT_IRRADIANCE];
+pub const PAGED_ARRAYS: &[PerPatch] =
+    &[PATCH_TABLE, PATCH_STATE, OUTGOING, IMAGE_SENDERS, TRANSFER_SUMS, FIRST_SHOT_IRRADIANCE];
 
 /// The largest page of a paged array for a device: its largest storage binding (and buffer),
 /// or `limit` if smaller (`RenderOptions::page_bytes`, a test knob that emulates a smaller

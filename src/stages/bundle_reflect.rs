@@ -1,10 +1,12 @@
 //! Bundle reflection (`wgsl/bundle_reflect.wgsl`): O_j of every patch into this step's
 //! bundle, and the step's largest radiance.
 
-use crate::gpu::bindings::{Kernel, KernelSpec, compute, read, read_write, uniform};
+use crate::gpu::bindings::{Kernel, KernelSpec, compute, read, read_write};
 use crate::gpu::kernel;
-use crate::gpu::scene_buffers::{FIRST_SHOT_TABLE_GROUP, OUTGOING, PATCH_STATE, PATCH_TABLE, Paged, SceneBuffers};
-use crate::layout::{GpuBundle, GpuMaterial, GpuPatch, GpuPatchState};
+use crate::gpu::scene_buffers::{
+    FIRST_SHOT_TABLE_GROUP, IMAGE_SENDERS, OUTGOING, PATCH_STATE, PATCH_TABLE, Paged, SceneBuffers,
+};
+use crate::layout::{GpuBundle, GpuImageSender, GpuMaterial, GpuPatch, GpuPatchState};
 
 pub const SPEC: KernelSpec = KernelSpec {
     stem: "bundle_reflect",
@@ -13,7 +15,11 @@ pub const SPEC: KernelSpec = KernelSpec {
     entry_points: &[compute("main", [64, 1, 1])],
     groups: &[
         &[
-            uniform::<GpuBundle>("bundle"),
+            // The step's bundle, as a storage buffer, not a uniform: lavapipe builds uniform
+            // values that steer a kernel's code into variants of it, compiled at dispatch, and
+            // with the glossy history's ten terms this kernel was compiled again at every step
+            // of a seed not seen before (docs/PERFORMANCE.md, "A longer glossy history").
+            read::<GpuBundle>("bundle"),
             read::<GpuPatch>("patches").paged(PATCH_TABLE.pages),
             read::<GpuMaterial>("materials"),
             // J_j, win_j of the previous step.
@@ -22,15 +28,10 @@ pub const SPEC: KernelSpec = KernelSpec {
             read_write::<[f32; 4]>("outgoing").paged(OUTGOING.pages),
             // Bits of the largest O channel (positive floats order like their bits).
             read_write::<u32>("max_bits"),
-            // rgb what the image gathers from j (its diffuse reflection of the mean J of the
-            // image steps so far), w s_j, or with `writes_first_bounce` the largest channel
-            // of Lfs_j; one writer per patch.
-            read_write::<[f32; 4]>("image_outgoing").paged(OUTGOING.pages),
-            // rgb Lbar_j as this step found it, before finalize updates it: the control
-            // variate of the image's gather at j's own pixels; w 0, or with
-            // `writes_first_bounce` the other two channels of Lfs_j (`pack_first_bounce`
-            // in wgsl/bundle_reflect.wgsl); one writer per patch.
-            read_write::<[f32; 4]>("image_mean_radiance").paged(OUTGOING.pages),
+            // What the image gathers from j and Lbar_j as this step found it
+            // (`GpuImageSender`; with `writes_first_bounce` Lfs_j in their w slots,
+            // `pack_first_bounce` in wgsl/bundle_reflect.wgsl); one writer per patch.
+            read_write::<GpuImageSender>("image_senders").paged(IMAGE_SENDERS.pages),
         ],
         FIRST_SHOT_TABLE_GROUP,
     ],
@@ -48,10 +49,9 @@ pub struct BundleReflect {
 /// gather reads (`SPEC`'s bindings of the same names).
 pub struct ReflectOutputs<'a> {
     pub outgoing: &'a Paged,
-    pub image_outgoing: &'a Paged,
-    pub image_mean_radiance: &'a Paged,
+    pub image_senders: &'a Paged,
     /// Whether the image evaluates near senders' first bounce per point and so reads Lfs_j,
-    /// which then rides in the w slots of `image_outgoing` and `image_mean_radiance`.
+    /// which then rides in the w slots of `image_senders`.
     pub writes_first_bounce: bool,
 }
 
@@ -66,7 +66,7 @@ impl BundleReflect {
         outputs: ReflectOutputs<'_>,
         like: Option<&Self>,
     ) -> Self {
-        let ReflectOutputs { outgoing, image_outgoing, image_mean_radiance, writes_first_bounce } = outputs;
+        let ReflectOutputs { outgoing, image_senders, writes_first_bounce } = outputs;
         let (built, pipeline) = match like {
             Some(like) => (like.kernel.clone(), like.pipeline.clone()),
             None => {
@@ -92,8 +92,7 @@ impl BundleReflect {
                     ("state", scene.state.resource()),
                     ("outgoing", outgoing.resource()),
                     ("max_bits", max_bits.into()),
-                    ("image_outgoing", image_outgoing.resource()),
-                    ("image_mean_radiance", image_mean_radiance.resource()),
+                    ("image_senders", image_senders.resource()),
                 ],
             ),
             table_group: scene.first_shot.bind_group(device, &built.layouts[1], built.paging, &scene.samples),

@@ -59,18 +59,21 @@ pub const SPEC: KernelSpec = KernelSpec {
         ],
         // The gather (`iteration::GatherBuffers`), after the step's transfer sorted its lines.
         &[
-            uniform::<GpuBundle>("bundle"),
+            // As a storage buffer, not a uniform: lavapipe builds uniform values that steer a
+            // kernel's code into variants, compiled at dispatch, and `gather` was compiled
+            // again at every step of a new seed where the scene has no first shot
+            // (docs/PERFORMANCE.md, "A longer glossy history").
+            read::<GpuBundle>("bundle"),
             // Surfaces per line, resolution^2: a line's bucket holds them up to LINE_BUCKET.
             read::<u32>("counts"),
             // (begin, end) of each longer line's slice of `fragments`, resolution^2.
             read::<[u32; 2]>("slices"),
             // (depth bits, patch | FRAGMENT_FRONT_BIT), each line's slice sorted by depth.
             read::<[u32; 2]>("fragments"),
-            // What each patch sends the image this step (`bundle_reflect`'s image_outgoing).
-            read::<[f32; 4]>("image_outgoing").paged(crate::gpu::scene_buffers::OUTGOING.pages),
-            // Lbar_j before this step (`bundle_reflect`'s image_mean_radiance): the control
-            // variate of the gather at patch j's pixels.
-            read::<[f32; 4]>("image_mean_radiance").paged(crate::gpu::scene_buffers::OUTGOING.pages),
+            // What each patch sends the image this step, and its Lbar_j before this step, the
+            // control variate of the gather at its pixels (`bundle_reflect`'s image_senders).
+            read::<crate::layout::GpuImageSender>("image_senders")
+                .paged(crate::gpu::scene_buffers::IMAGE_SENDERS.pages),
         ],
     ],
 };
@@ -336,24 +339,19 @@ impl ImageEstimate {
     /// Group 2; without an iteration, placeholders that `direct` never reads.
     fn gather_group(device: &wgpu::Device, built: &Kernel, gather: Option<&GatherBuffers>) -> wgpu::BindGroup {
         let placeholder;
-        let (bundle, counts, slices, fragments, outgoing, mean) = match gather {
-            Some(g) => {
-                (&g.bundle, &g.counts, &g.slices, &g.fragments, &g.image_outgoing[..], &g.image_mean_radiance[..])
-            }
+        let (bundle, counts, slices, fragments, senders) = match gather {
+            Some(g) => (&g.bundle, &g.counts, &g.slices, &g.fragments, &g.image_senders[..]),
             None => {
                 let none = wgpu::BufferUsages::empty();
+                let no_bundle = <GpuBundle as bytemuck::Zeroable>::zeroed();
                 placeholder = [
-                    buffers::uniform(
-                        device,
-                        "firstshot.image_estimate.no_bundle",
-                        &<GpuBundle as bytemuck::Zeroable>::zeroed(),
-                    ),
+                    buffers::storage_init(device, "firstshot.image_estimate.no_bundle", &[no_bundle], none),
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_lines", 16, none),
                     buffers::storage_zeroed(device, "firstshot.image_estimate.no_fragments", 16, none),
-                    buffers::storage_zeroed(device, "firstshot.image_estimate.no_image_outgoing", 16, none),
+                    buffers::storage_zeroed(device, "firstshot.image_estimate.no_image_senders", 32, none),
                 ];
                 let page = std::slice::from_ref(&placeholder[3]);
-                (&placeholder[0], &placeholder[1], &placeholder[1], &placeholder[2], page, page)
+                (&placeholder[0], &placeholder[1], &placeholder[1], &placeholder[2], page)
             }
         };
         built.bind_group(
@@ -364,8 +362,7 @@ impl ImageEstimate {
                 ("counts", counts.into()),
                 ("slices", slices.into()),
                 ("fragments", fragments.into()),
-                ("image_outgoing", crate::gpu::bindings::Resource::Pages(outgoing)),
-                ("image_mean_radiance", crate::gpu::bindings::Resource::Pages(mean)),
+                ("image_senders", crate::gpu::bindings::Resource::Pages(senders)),
             ],
         )
     }

@@ -38,13 +38,19 @@ struct LightSample {
 // Iteration state of a patch (Rust: GpuPatchState).
 struct PatchState {
     incoming: vec4<f32>,  // rgb J_j, w how many of `earlier` are written
-    direction: vec4<f32>, // xyz win_j
-    diffuse: vec4<f32>,   // rgb K_j = J_j - (|n_j . d| - 1/2) Lbar_j, reflected diffusely
+    diffuse: vec3<f32>,   // K_j = J_j - (|n_j . d| - 1/2) Lbar_j, reflected diffusely
+    direction: u32,       // win_j (octahedral_pack), 0 before step 1
     mean_radiance: vec4<f32>, // rgb Lbar_j, running estimate of the mean incoming radiance
     diffuse_sum: vec4<f32>, // rgb the sum of K_j over the image steps so far, w their number
     // J_j of the GLOSSY_HISTORY bundles before, newest first: x J's rgb
     // (pack_history_radiance), y win (octahedral_pack); the glossy reflection averages them.
     earlier: array<vec2<u32>, GLOSSY_HISTORY>,
+}
+
+// What a patch sends the image's gather this step (Rust: GpuImageSender).
+struct ImageSender {
+    outgoing: vec4<f32>,      // rgb what the image gathers from it, w s_j or Lfs_j's top
+    mean_radiance: vec4<f32>, // rgb Lbar_j before this step, w 0 or Lfs_j's rest
 }
 
 // An rgb radiance (of either sign per channel) in 32 bits for the glossy history: a shared
