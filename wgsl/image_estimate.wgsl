@@ -48,6 +48,14 @@
 @group(1) @binding(2) var kept_atlas: texture_2d<u32>;
 @group(1) @binding(3) var pass_atlas: texture_2d<u32>;
 @group(2) @binding(0) var<storage, read> bundle: Bundle;
+
+// The step's bundle, read once by each gather invocation (`this_bundle = bundle`). It is bound
+// as a storage buffer, not a uniform: lavapipe builds uniform values that steer a kernel's
+// code into variants compiled at dispatch, and `gather` was compiled anew at every step of a
+// new seed where the scene has no first shot. Its fields read from storage where they are
+// used cost 4 ms more a gather at 256 x 256 (loaded again after each store to the image);
+// a private copy is loaded once.
+var<private> this_bundle: Bundle;
 @group(2) @binding(1) var<storage, read> counts: array<u32>;
 @group(2) @binding(2) var<storage, read> slices: array<vec2<u32>>;
 @group(2) @binding(3) var<storage, read> fragments: array<vec2<u32>>;
@@ -588,19 +596,19 @@ struct OnLine {
 // Where x falls on this step's grid, in lines (the cell is its integer part); negative or
 // past the resolution when x projects off the grid.
 fn cell_of(x: vec3<f32>) -> vec2<f32> {
-    let rel = x - bundle.centre.xyz;
-    let clip = vec2<f32>(dot(rel, bundle.axis_u.xyz) + bundle.axis_u.w, dot(rel, bundle.axis_v.xyz) + bundle.axis_v.w);
-    return vec2<f32>(0.5 * (clip.x + 1.0), 0.5 * (1.0 - clip.y)) * f32(bundle.resolution);
+    let rel = x - this_bundle.centre.xyz;
+    let clip = vec2<f32>(dot(rel, this_bundle.axis_u.xyz) + this_bundle.axis_u.w, dot(rel, this_bundle.axis_v.xyz) + this_bundle.axis_v.w);
+    return vec2<f32>(0.5 * (clip.x + 1.0), 0.5 * (1.0 - clip.y)) * f32(this_bundle.resolution);
 }
 
 // The line of grid cell `cell` with `lo` at its start (`search` sets it); `outside` off the
 // grid.
 fn line_at(cell: vec2<i32>) -> OnLine {
-    let r = i32(bundle.resolution);
+    let r = i32(this_bundle.resolution);
     if (any(cell < vec2<i32>(0)) || any(cell >= vec2<i32>(r))) {
         return OnLine(0u, 0u, 0u, true);
     }
-    let line = u32(cell.y) * bundle.resolution + u32(cell.x);
+    let line = u32(cell.y) * this_bundle.resolution + u32(cell.x);
     // The line's sorted surfaces: its bucket, or past LINE_BUCKET its own slice
     // (bundle_transfer).
     let count = counts[line];
@@ -646,10 +654,10 @@ fn search(line_in: OnLine, x: vec3<f32>, s: f32) -> OnLine {
     if (line.outside) {
         return line;
     }
-    let depth = dot(x - bundle.centre.xyz, bundle.direction.xyz);
+    let depth = dot(x - this_bundle.centre.xyz, this_bundle.direction.xyz);
     // The line's fragments lie at depths taken at its centre, up to a pixel's half diagonal
     // from x's ray: a surface within `slack` of x along the line may still be ahead of it.
-    let slack = 0.75 * sqrt(bundle.direction.w);
+    let slack = 0.75 * sqrt(this_bundle.direction.w);
     let start_depth = depth - s * slack;
     // First fragment at or past start_depth in the direction of travel (binary search over
     // the sorted line). A line within its bucket (LINE_BUCKET = 8 places, nearly every line)
@@ -679,7 +687,7 @@ fn search(line_in: OnLine, x: vec3<f32>, s: f32) -> OnLine {
 // `gather_edges` then decides.
 fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> Received {
     if (line.outside) {
-        return received_const(bundle.environment.rgb, true);
+        return received_const(this_bundle.environment.rgb, true);
     }
     let begin = line.begin;
     let end = line.end;
@@ -706,7 +714,7 @@ fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> Receiv
         let k = own - 1u;
         let front = (fragments[k].y & FRAGMENT_FRONT_BIT) != 0u;
         if ((front && k + 1u >= end) || (!front && k == begin)) {
-            return received_const(bundle.environment.rgb, true);
+            return received_const(this_bundle.environment.rgb, true);
         }
         let other = fragments[select(k - 1u, k + 1u, front)].y;
         if (((other & FRAGMENT_FRONT_BIT) != 0u) != front) {
@@ -735,7 +743,7 @@ fn own_received(j: u32, x: vec3<f32>, toward: vec3<f32>, line: OnLine) -> Receiv
 fn nearest_received(j: u32, x: vec3<f32>, toward: vec3<f32>, s: f32, line: OnLine) -> Received {
     let range = vec2<u32>(line.begin, line.end);
     let lo = line.lo;
-    let eps = 1e-5 / bundle.centre.w;
+    let eps = 1e-5 / this_bundle.centre.w;
     let none = Candidate(3.4e38, NO_PATCH);
     var n = Nearest(none, none, false);
     if (s > 0.0) {
@@ -895,15 +903,15 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
 // the classes' errors, each smooth over the image, show as noise rather than as a fixed
 // 2 x 2 pattern.
 fn class_pixel(block: vec2<u32>) -> vec2<u32> {
-    let stride = bundle.pixel_stride;
+    let stride = this_bundle.pixel_stride;
     if (stride == 1u) {
         return block;
     }
-    var h = (block.x * 0x8da6b343u) ^ (block.y * 0xd8163841u) ^ bundle.pixel_shuffle;
+    var h = (block.x * 0x8da6b343u) ^ (block.y * 0xd8163841u) ^ this_bundle.pixel_shuffle;
     h = (h ^ (h >> 16u)) * 0x7feb352du;
     h = (h ^ (h >> 15u)) * 0x846ca68bu;
     h = h ^ (h >> 16u);
-    let offset = (bundle.pixel_class + (h >> 30u)) & 3u;
+    let offset = (this_bundle.pixel_class + (h >> 30u)) & 3u;
     return block * 2u + vec2<u32>(offset & 1u, offset >> 1u);
 }
 
@@ -913,11 +921,12 @@ fn class_pixel(block: vec2<u32>) -> vec2<u32> {
 // it before the pass; then pixel and `lo` a pair) and left to `gather_edges`.
 @compute @workgroup_size(8, 8)
 fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
+    this_bundle = bundle;
     let size = camera.size.xy;
     // Only this bundle's pixels, one of each stride x stride block of the image (with four
     // bundles a step, each pixel of a 2 x 2 block gathers through its own): one invocation
     // per block, the host dispatching the blocks that meet this band's rows.
-    let xy = class_pixel(vec2<u32>(gid.x, gid.y + params.first_row / bundle.pixel_stride));
+    let xy = class_pixel(vec2<u32>(gid.x, gid.y + params.first_row / this_bundle.pixel_stride));
     // This band's rows: its image_sum holds them alone, from params.first_row on.
     let pixel = (xy.y - params.first_row) * size.x + xy.x;
     if (xy.x >= size.x || xy.y >= size.y || xy.y < params.first_row || pixel >= arrayLength(&image_sum)) {
@@ -929,7 +938,7 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         radiance = patches_at(at.j).emission.rgb;
     }
     if (at.kind == SEEN_SURFACE) {
-        let d = bundle.direction.xyz;
+        let d = this_bundle.direction.xyz;
         let s = bundle_side(at.n, d);
         let toward = s * d;
         let line = on_line(at.x, s);
@@ -1016,7 +1025,7 @@ fn edge_received(at: Seen, toward: vec3<f32>, s: f32, lo: u32) -> Received {
         received = beside_nearest(at.j, at.x, toward, s, beside[c]);
     }
     if (!received.decided) {
-        received = received_const(bundle.environment.rgb, true);
+        received = received_const(this_bundle.environment.rgb, true);
     }
     return received;
 }
@@ -1030,12 +1039,13 @@ fn edge_received(at: Seen, toward: vec3<f32>, s: f32, lo: u32) -> Received {
 // candidates on x's line (`nearest_received`).
 @compute @workgroup_size(64)
 fn gather_edges(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    this_bundle = bundle;
     let size = camera.size.xy;
     let listed = atomicLoad(&edges[0]);
     for (var i = gid.x; i < listed; i += groups.x * 64u) {
         let pixel = atomicLoad(&edges[2u * i + 1u]);
         let at = seen(vec2<u32>(pixel % size.x, pixel / size.x + params.first_row));
-        let d = bundle.direction.xyz;
+        let d = this_bundle.direction.xyz;
         let s = bundle_side(at.n, d);
         let toward = s * d;
         let received = edge_received(at, toward, s, atomicLoad(&edges[2u * i + 2u]));
@@ -1094,13 +1104,14 @@ fn first_bounce_correction(at: Seen, m: u32, toward: vec3<f32>) -> vec3<f32> {
 // three times as long on lavapipe, though few pixels need it.
 @compute @workgroup_size(64)
 fn gather_first_bounce(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    this_bundle = bundle;
     let size = camera.size.xy;
     let listed = atomicLoad(&near_senders[0]);
     for (var i = gid.x; i < listed; i += groups.x * 64u) {
         let pixel = atomicLoad(&near_senders[2u * i + 1u]);
         let m = atomicLoad(&near_senders[2u * i + 2u]) - 1u;
         let at = seen(vec2<u32>(pixel % size.x, pixel / size.x + params.first_row));
-        let toward = bundle_side(at.n, bundle.direction.xyz) * bundle.direction.xyz;
+        let toward = bundle_side(at.n, this_bundle.direction.xyz) * this_bundle.direction.xyz;
         image_sum[pixel] = image_sum[pixel] + vec4<f32>(first_bounce_correction(at, m, toward), 0.0);
     }
 }
