@@ -193,8 +193,8 @@ pub struct BundleNeeds {
 /// finalize, each triangle's rasterisation) run four times: on the Sierpinski scene at
 /// 256 x 256 (patches 704, image less) four bundles of 352 had 0.83 of the squared error at
 /// 50 steps for 1.2 times the time (0.79 with the history of eleven bundles), so one bundle
-/// reached each error first; at its 512 x 512
-/// (image 832) four of 416 had 0.58 of the squared noise for 1.2 times the time; the Cornell
+/// reached each error first; at its 512 x 512 (image 832) four of 416 had 0.58 of the
+/// squared noise for 1.2 times the time; the Cornell
 /// box (image 256, patches 70 at 256 x 256) reached a third of the squared error in 1.5
 /// times the time (docs/PERFORMANCE.md, "Four bundles a step", "A longer glossy history").
 /// (Until the glossy history spanned seven bundles, the image's need had to be twice the
@@ -452,7 +452,8 @@ impl Iteration {
         let bundle = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("firstshot.iteration.bundle"),
             size: std::mem::size_of::<GpuBundle>() as u64,
-            // STORAGE: `bundle_reflect` reads it as a storage buffer (its SPEC says why).
+            // STORAGE: `bundle_reflect` and the image's gather read it as a storage buffer
+            // (their SPECs say why); the other stages as a uniform.
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
