@@ -178,14 +178,15 @@ pub fn run(
         for (i, sample) in patches.samples.iter().enumerate() {
             let (faces, pixel) = faces(sample, window, resolution, near, (buffers.centre, buffers.radius));
             for face in &faces {
-                ctx.queue.write_buffer(&item_buffer.camera, 0, bytemuck::bytes_of(&face.view.gpu([0.5, 0.5])));
+                let view = face.view.gpu([0.5, 0.5]);
+                ctx.queue.write_buffer(&item_buffer.camera, 0, bytemuck::bytes_of(&view));
                 let params =
                     GpuFaceParams { sample: i as u32, patch_count: buffers.patch_count, rows: face.rows, _pad: 0 };
                 ctx.queue.write_buffer(&reduce.face_params, 0, bytemuck::bytes_of(&params));
                 let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("firstshot.first_shot.face"),
                 });
-                item_buffer.record_rows(&mut encoder, &buffers.raster, face.rows);
+                item_buffer.record_rows(&mut encoder, &buffers.raster, face.rows, Some(&view));
                 reduce.record_face(&mut encoder, face.rows);
                 ctx.queue.submit([encoder.finish()]);
                 face_count += 1;

@@ -155,6 +155,9 @@ pub struct RenderOptions {
     /// `None`: by each view's size (`camera_item_buffer::camera_supersample`). Set only by
     /// tests, to check that the supersampled buffer changes nothing but the rasters' count.
     pub camera_supersample: Option<u32>,
+    /// Whether the item buffers draw only the chunks of triangles that can reach their view
+    /// (`gpu::frustum`; the default). Set only by tests, to check that it changes no texel.
+    pub cull_raster: bool,
 }
 
 impl RenderOptions {
@@ -183,6 +186,7 @@ impl RenderOptions {
             patch_first_bounce: false,
             gather: Default::default(),
             camera_supersample: None,
+            cull_raster: true,
         }
     }
 
@@ -425,6 +429,7 @@ pub fn fingerprint(scene: &Scene, options: &RenderOptions) -> u64 {
     options.image_band_rows = None;
     options.page_bytes = None;
     options.memory_limit = None;
+    options.cull_raster = true;
     crate::checkpoint::fnv1a(format!("{scene:?}\n{options:?}").as_bytes())
 }
 
@@ -715,6 +720,9 @@ pub struct ViewImage {
     rastered: Option<[u64; 2]>,
     /// Whether this step renders the view's camera item buffer (`write_camera`).
     raster_due: bool,
+    /// The view its item buffer is rendered from (the raster camera's uniform), whose
+    /// frustum leaves out the triangles that cannot reach it (`gpu::frustum`).
+    raster_view: GpuCamera,
 }
 
 /// One render, set up: the scene on the GPU, its first-shot table, the iteration state and
@@ -798,6 +806,7 @@ impl<'a> Renderer<'a> {
         let upload = Instant::now();
         let page = crate::gpu::scene_buffers::page_bytes(&ctx.limits(), options.page_bytes);
         let mut buffers = SceneBuffers::with_pages(device, scene, patches, options.first_shot, page);
+        buffers.raster.cull = options.cull_raster;
         let upload_ms = milliseconds(upload);
         let first_shot = if !options.first_shot || patches.samples.is_empty() {
             None
@@ -854,7 +863,15 @@ impl<'a> Renderer<'a> {
                 like.map(|v| &v.estimate),
             );
             estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);
-            views.push(ViewImage { name, camera, item_buffer, estimate, rastered: None, raster_due: true });
+            views.push(ViewImage {
+                name,
+                camera,
+                item_buffer,
+                estimate,
+                rastered: None,
+                raster_due: true,
+                raster_view: bytemuck::Zeroable::zeroed(),
+            });
         }
         Ok(Renderer {
             ctx,
@@ -976,6 +993,7 @@ impl<'a> Renderer<'a> {
             let mut cam = gpu_camera(&c, c.width, c.height, self.near, [position[0] as f32, position[1] as f32]);
             if s == 1 {
                 view.raster_due = true;
+                view.raster_view = cam;
             } else {
                 // The texel of the pixel's S x S that holds the sample, and the sample's offset
                 // from that texel's corner, in texels (exact: S is a power of two).
@@ -990,6 +1008,7 @@ impl<'a> Renderer<'a> {
                     let buffer = view.item_buffer.raster_camera.as_ref().expect("a supersampled view's raster camera");
                     queue.write_buffer(buffer, 0, bytemuck::bytes_of(&raster));
                     view.rastered = Some(key);
+                    view.raster_view = raster;
                 }
             }
             queue.write_buffer(&view.item_buffer.camera, 0, bytemuck::bytes_of(&cam));
@@ -1076,10 +1095,14 @@ impl<'a> Renderer<'a> {
         let windows_due = self.windows_due;
         let mut stages: Vec<Stage<'_>> = Vec::new();
         for (v, view) in self.views.iter().enumerate() {
-            let (camera, estimate) = (&view.item_buffer, &view.estimate);
+            let (camera, estimate, raster_view) = (&view.item_buffer, &view.estimate, &view.raster_view);
             if view.raster_due {
-                stages
-                    .push(("camera", Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.raster))));
+                stages.push((
+                    "camera",
+                    Box::new(move |e: &mut wgpu::CommandEncoder| {
+                        camera.record_rows(e, &buffers.raster, camera.height, Some(raster_view))
+                    }),
+                ));
             }
             if (direct || windows_due) && v == 0 {
                 stages.push((

@@ -841,3 +841,111 @@ fn test13_sun_shadow_ends_at_the_occluders_outline_not_a_texel_past_it() {
     assert_eq!(shaded.1, 0, "light leaked into the shadow: {shaded:?} (count, wrong)");
     assert!(lit.1 * 10 <= lit.0, "lit {lit:?} (count, wrong): the outline is shaded past the roof's edge");
 }
+
+/// A floor under a 16 x 16 grid of small tiles at several heights, lit by every kind of light
+/// (an area light, a point light, a spot and a sun), with the camera above one corner of
+/// the grid: 514 rasterised triangles, whose chunks of 64 consecutive ones are strips of the grid
+/// that some window faces and the camera see and others do not.
+fn tile_field() -> String {
+    let mut text = String::from(
+        r#"
+format = 1
+[camera]
+position = [-3.4, 3.0, -3.6]
+look_at = [-3.4, 0.0, -3.4]
+up = [0.0, 1.0, 0.0]
+fov_y = 30.0
+width = 48
+height = 40
+[settings]
+patch_size = 1.0
+[materials.grey]
+type = "diffuse"
+albedo = [0.6, 0.6, 0.6]
+[materials.gloss]
+type = "phong"
+diffuse = [0.2, 0.2, 0.2]
+specular = [0.5, 0.5, 0.5]
+shininess = 8.0
+[[shapes]]
+type = "quad"
+vertices = [[5.0, 0.0, -5.0], [-5.0, 0.0, -5.0], [-5.0, 0.0, 5.0], [5.0, 0.0, 5.0]]
+material = "grey"
+[[lights]]
+type = "area"
+vertices = [[-2.0, 3.0, 2.0], [-2.5, 3.0, 2.0], [-2.5, 3.0, 2.5], [-2.0, 3.0, 2.5]]
+radiance = [20.0, 20.0, 20.0]
+[[lights]]
+type = "point"
+position = [-3.8, 1.2, -3.8]
+power = [30.0, 30.0, 30.0]
+[[lights]]
+type = "spot"
+position = [3.0, 2.5, 3.0]
+direction = [-0.3, -1.0, -0.3]
+intensity = [10.0, 10.0, 10.0]
+inner_angle = 10.0
+outer_angle = 20.0
+[[lights]]
+type = "directional"
+direction = [0.4, -1.0, 0.2]
+irradiance = [1.0, 1.0, 1.0]
+"#,
+    );
+    for i in 0..16 {
+        for j in 0..16 {
+            let (x, z, h) = (-4.0 + 0.5 * i as f64, -4.0 + 0.5 * j as f64, 0.15);
+            let y = 0.3 + 0.2 * ((7 * i + 3 * j) % 5) as f64;
+            let material = if (i + j) % 2 == 0 { "grey" } else { "gloss" };
+            text += &format!(
+                "[[shapes]]\ntype = \"quad\"\nvertices = [[{}, {y}, {}], [{}, {y}, {}], [{}, {y}, {}], [{}, {y}, {}]]\nmaterial = \"{material}\"\n",
+                x + h,
+                z - h,
+                x - h,
+                z - h,
+                x - h,
+                z + h,
+                x + h,
+                z + h
+            );
+        }
+    }
+    text
+}
+
+#[test]
+fn test14_culled_item_buffers_change_no_pixel() {
+    // The item buffers draw only the chunks of triangles that can reach their view
+    // (`gpu::frustum`). The oracle is the same render drawing every triangle: the first-shot
+    // table, the lights' windows (a hemicube with half faces, a point light's cube, a spot's
+    // face, a sun's parallel projection) and the camera's item buffer must be the same, so
+    // the images too, to the bit.
+    let Some(ctx) = common::gpu() else { return };
+    let (_scratch, scene) = common::scenes::load_text("lights", "test14", &tile_field());
+    let mut options = RenderOptions::from_scene(&scene);
+    (options.iterations, options.direct_passes, options.burn_in) = (3, 2, Some(1));
+    (options.hemicube_resolution, options.bundle_resolution, options.shadow_resolution) =
+        (Some(96), Some(64), Some(128));
+    let patches = scene::tessellate(&scene, options.patch_size).unwrap();
+    let run = |cull: bool, iterations: u32| {
+        let o = RenderOptions { cull_raster: cull, iterations, ..options.clone() };
+        render(&ctx, &scene, &patches, &o).unwrap()
+    };
+    for iterations in [0, 3] {
+        let (culled, drawn) = (run(true, iterations), run(false, iterations));
+        assert_eq!(culled.stats.first_shot_pairs, drawn.stats.first_shot_pairs);
+        let differing = culled.image.pixels.iter().zip(&drawn.image.pixels).filter(|(a, b)| a != b).count();
+        let lit = culled.image.pixels.iter().filter(|p| p.iter().any(|&c| c > 0.0)).count();
+        eprintln!("{iterations} steps: {differing} of {} pixels differ, {lit} lit", culled.image.pixels.len());
+        assert!(lit > culled.image.pixels.len() / 2, "the camera sees the lit tiles: {lit} pixels lit");
+        assert_eq!(differing, 0, "culling changed {differing} pixels after {iterations} steps");
+    }
+    // The test means something only if the culling skips triangles here: the camera, above one
+    // corner of the grid, leaves most strips of it out.
+    let triangles = firstshot::gpu::scene_buffers::raster_triangles(&patches);
+    let chunks = firstshot::gpu::frustum::ChunkBoxes::of(&triangles.vertices);
+    let view = firstshot::stages::camera_item_buffer::gpu_camera(&scene.camera, 48, 40, 1e-3, [0.5, 0.5]);
+    let kept: u32 = chunks.visible(&view, None).iter().map(|r| r.end - r.start).sum();
+    eprintln!("the camera draws {kept} of {} triangles", chunks.triangles);
+    assert!(kept > 0 && 2 * kept < chunks.triangles, "kept {kept} of {} triangles", chunks.triangles);
+}

@@ -4,6 +4,7 @@
 pub mod bindings;
 pub mod buffers;
 pub mod context;
+pub mod frustum;
 pub mod kernel;
 pub mod profile;
 pub mod scene_buffers;

@@ -3,6 +3,7 @@
 
 use super::bindings::{self, Binding, read};
 use super::buffers;
+use super::frustum::ChunkBoxes;
 use crate::layout::*;
 use crate::scene::{MaterialKind, PatchKind, Patches, SampleKind, Scene};
 use glam::DVec3;
@@ -437,6 +438,11 @@ pub struct RasterMesh {
     pub vertices: wgpu::Buffer,
     pub lattice: wgpu::Buffer,
     pub triangles: u32,
+    /// Bounding boxes of runs of consecutive triangles, for `draw_in_view`.
+    pub chunks: ChunkBoxes,
+    /// Whether `draw_in_view` skips the chunks outside the view (the default); tests turn it
+    /// off to check that the item buffers do not change.
+    pub cull: bool,
 }
 
 impl RasterMesh {
@@ -446,6 +452,8 @@ impl RasterMesh {
             vertices: buffers::storage_init(device, "firstshot.scene.raster_vertices", &triangles.vertices, usage),
             lattice: buffers::storage_init(device, "firstshot.scene.raster_lattice", &triangles.lattice, usage),
             triangles: triangles.triangle_count(),
+            chunks: ChunkBoxes::of(&triangles.vertices),
+            cull: true,
         }
     }
 
@@ -454,6 +462,26 @@ impl RasterMesh {
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_vertex_buffer(1, self.lattice.slice(..));
         pass.draw(0..self.triangles * 3, instances);
+    }
+
+    /// Draws, once per instance of `instances`, the triangles that can reach `view` (above
+    /// `rows` of its rows where given): the chunks wholly outside its clip volume are skipped
+    /// (`frustum`), which changes no texel of the item buffer.
+    pub fn draw_in_view(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        instances: std::ops::Range<u32>,
+        view: &GpuCamera,
+        rows: Option<u32>,
+    ) {
+        if !self.cull {
+            return self.draw(pass, instances);
+        }
+        pass.set_vertex_buffer(0, self.vertices.slice(..));
+        pass.set_vertex_buffer(1, self.lattice.slice(..));
+        for run in self.chunks.visible(view, rows) {
+            pass.draw(run.start * 3..run.end * 3, instances.clone());
+        }
     }
 }
 

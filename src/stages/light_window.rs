@@ -71,7 +71,8 @@ impl WindowAtlas {
             let side = face.view.size[0];
             pass.set_viewport(x as f32, y as f32, side as f32, side as f32, 0.0, 1.0);
             pass.set_scissor_rect(x, y, side, rows.clamp(1, side));
-            raster.draw(&mut pass, *index..*index + 1);
+            let rows = (rows < side).then_some(rows.max(1));
+            raster.draw_in_view(&mut pass, *index..*index + 1, &face.view, rows);
         }
     }
 }
