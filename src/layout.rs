@@ -55,6 +55,10 @@ pub const LONG_LINES_WORKGROUPS: u32 = 64;
 /// runs keep the barrier-bound workgroup scan a small share of the work on CPU adapters).
 pub const PREFIX_SUM_WORKGROUP: u32 = 256;
 pub const PREFIX_SUM_PER_THREAD: u32 = 16;
+/// Texels of a face's row that one invocation of the first shot's `reduce_face` adds up: a
+/// run of them seen through one patch is one pair of atomic adds, not one a texel (the
+/// atomics and the patch loads were most of the first shot's time on the CPU adapter).
+pub const FIRST_SHOT_RUN: u32 = 8;
 /// `LightSample::kind` and `DirectLight::kind`: a point light, or a point on an area light
 /// (a vertex of its mesh in the first shot, a point drawn on it in the direct light), a
 /// spot light or a directional light.
@@ -438,6 +442,7 @@ pub fn wgsl_constants() -> String {
          const GLOSSY_ALBEDO_SAMPLES: u32 = {GLOSSY_ALBEDO_SAMPLES}u;\n\
          const PREFIX_SUM_WORKGROUP: u32 = {PREFIX_SUM_WORKGROUP}u;\n\
          const PREFIX_SUM_PER_THREAD: u32 = {PREFIX_SUM_PER_THREAD}u;\n\
+         const FIRST_SHOT_RUN: u32 = {FIRST_SHOT_RUN}u;\n\
          const GLOSSY_HISTORY: u32 = {GLOSSY_HISTORY}u;\n\
          const PI: f32 = {pi:?};\n\
          const FIXED_POINT_SCALE: f32 = {scale:?};\n\

@@ -8,7 +8,7 @@
 // Sums are exact 64-bit integers (weights in [0, 1] times FIXED_POINT_SCALE, split over two
 // u32 atomics), so the result does not depend on thread order and needs no float atomics.
 //
-// Compute. reduce_face: one invocation per face pixel. append_sample: one invocation per
+// Compute. reduce_face: one invocation per run of FIRST_SHOT_RUN pixels of a face row. append_sample: one invocation per
 // patch (2D dispatch past 65535 workgroups), the only writer of its row count. The pair
 // count may exceed the capacity: then the host grows the list and runs the first shot again.
 // Host: src/stages/first_shot_reduce.rs. Its `SPEC` is the one statement of the bindings (names,
@@ -25,31 +25,39 @@
 @group(0) @binding(8) var<storage, read_write> pairs: array<vec4<u32>>;
 @group(0) @binding(9) var<storage, read_write> pair_count: atomic<u32>;
 
-@compute @workgroup_size(8, 8)
-fn reduce_face(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if (gid.x >= face.size.x || gid.y >= params.rows) {
+// Adds a run's sum (lo, hi: 64 bits) to patch j's; the carry of the low word into the high.
+fn add_to_sum(j: u32, lo: u32, hi: u32) {
+    if ((lo | hi) == 0u) {
         return;
     }
-    let id = textureLoad(item_buffer, vec2<i32>(gid.xy), 0).x;
-    if (id == NO_PATCH || id > params.patch_count) {
-        return;
+    var carry = hi;
+    if (lo != 0u) {
+        let old = atomicAdd(&sums[2u * j], lo);
+        if (old > 0xffffffffu - lo) {
+            carry += 1u;
+        }
     }
-    let j = id - 1u;
-    let n = patches_at(j).normal;
-    let s = samples[params.sample];
+    if (carry != 0u) {
+        atomicAdd(&sums[2u * j + 1u], carry);
+    }
+}
+
+// The weight of face pixel `pixel` for a patch of plane `n` (xyz normal, w offset), 0 if the
+// patch's back faces the sample, as a fixed-point integer.
+fn pixel_weight(n: vec4<f32>, s: LightSample, pixel: vec2<u32>) -> u32 {
     var weight = 1.0;
     if (s.kind == LIGHT_DIRECTIONAL) {
         // A parallel projection: every pixel has the same area dP (in the host's factor).
         // Only front faces receive: the light must travel against the patch's normal.
         if (dot(n.xyz, s.normal.xyz) >= 0.0) {
-            return;
+            return 0u;
         }
     } else {
         // Only front faces receive: the sample must lie on the front side of the patch's plane.
         if (dot(n.xyz, s.position.xyz) - n.w <= 0.0) {
-            return;
+            return 0u;
         }
-        let v = pixel_direction(face, gid.xy);
+        let v = pixel_direction(face, pixel);
         let len = length(v);
         // The face's normal is `forward` (unit) at focal distance 1, so cos(theta_p) = 1 / |v|.
         weight = 1.0 / (len * len * len);
@@ -60,13 +68,47 @@ fn reduce_face(@builtin(global_invocation_id) gid: vec3<u32>) {
             weight *= spot_falloff(dot(v / len, s.normal.xyz), s.cone_scale, s.cone_offset);
         }
     }
-    let fixed = u32(min(weight, 1.0) * FIXED_POINT_SCALE + 0.5);
-    if (fixed == 0u) {
+    return u32(min(weight, 1.0) * FIXED_POINT_SCALE + 0.5);
+}
+
+// One invocation per run of FIRST_SHOT_RUN pixels of a row: neighbouring pixels mostly see
+// the same patch, so the run adds up each patch's pixels in registers (exact 64-bit integer
+// sums, as the atomics are) and adds them to the patch's sum once per change of patch.
+@compute @workgroup_size(8, 8)
+fn reduce_face(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let first = gid.x * FIRST_SHOT_RUN;
+    if (first >= face.size.x || gid.y >= params.rows) {
         return;
     }
-    let old = atomicAdd(&sums[2u * j], fixed);
-    if (old > 0xffffffffu - fixed) {
-        atomicAdd(&sums[2u * j + 1u], 1u);
+    let s = samples[params.sample];
+    let end = min(first + FIRST_SHOT_RUN, face.size.x);
+    var current = NO_PATCH;
+    var n = vec4<f32>(0.0);
+    var lo = 0u;
+    var hi = 0u;
+    for (var x = first; x < end; x++) {
+        let id = textureLoad(item_buffer, vec2<i32>(i32(x), i32(gid.y)), 0).x;
+        if (id == NO_PATCH || id > params.patch_count) {
+            continue;
+        }
+        if (id != current) {
+            if (current != NO_PATCH) {
+                add_to_sum(current - 1u, lo, hi);
+            }
+            current = id;
+            n = patches_at(id - 1u).normal;
+            lo = 0u;
+            hi = 0u;
+        }
+        let fixed = pixel_weight(n, s, vec2<u32>(x, gid.y));
+        let before = lo;
+        lo += fixed;
+        if (lo < before) {
+            hi += 1u;
+        }
+    }
+    if (current != NO_PATCH) {
+        add_to_sum(current - 1u, lo, hi);
     }
 }
 

@@ -4,7 +4,7 @@
 use crate::gpu::bindings::{KernelSpec, compute, read, read_write, uint_texture, uniform};
 use crate::gpu::scene_buffers::SceneBuffers;
 use crate::gpu::{buffers, kernel};
-use crate::layout::{GpuAppendParams, GpuCamera, GpuFaceParams, GpuLightSample, GpuPatch};
+use crate::layout::{FIRST_SHOT_RUN, GpuAppendParams, GpuCamera, GpuFaceParams, GpuLightSample, GpuPatch};
 use crate::stages::camera_item_buffer::CameraItemBuffer;
 
 pub const SPEC: KernelSpec = KernelSpec {
@@ -118,7 +118,7 @@ impl FirstShotReduce {
 
     /// Adds the weights of the face just rendered (its uniform and `face_params` written).
     pub fn record_face(&self, encoder: &mut wgpu::CommandEncoder, rows: u32) {
-        let groups = SPEC.grid("reduce_face", [self.face_size[0], rows]);
+        let groups = SPEC.grid("reduce_face", [self.face_size[0].div_ceil(FIRST_SHOT_RUN), rows]);
         kernel::dispatch(encoder, "firstshot.first_shot_reduce.reduce_face", &self.reduce, &[&self.bind_group], groups);
     }
 
