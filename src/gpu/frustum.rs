@@ -233,8 +233,8 @@ mod tests {
 
     #[test]
     fn runs_merge_adjacent_chunks_and_end_at_the_last_triangle() {
-        // Triangles along x, one chunk per unit; a view looking down -z at x in [-1, 1]
-        // (parallel projection) keeps the chunks whose boxes meet that strip.
+        // Triangles along x, a chunk every 4 units; a parallel view looking down -z at
+        // |x| <= 4.5 keeps the chunks whose boxes meet that strip, as one run.
         let n = CHUNK_TRIANGLES * 5 + 7;
         let vertices: Vec<RasterVertex> = (0..n * 3)
             .map(|v| {
