@@ -186,7 +186,7 @@ pub fn run(
                 let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("firstshot.first_shot.face"),
                 });
-                item_buffer.record_rows(&mut encoder, &buffers.raster, face.rows, Some(&view));
+                item_buffer.record_rows(&mut encoder, &buffers.raster, face.rows, &view);
                 reduce.record_face(&mut encoder, face.rows);
                 ctx.queue.submit([encoder.finish()]);
                 face_count += 1;

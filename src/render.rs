@@ -1099,9 +1099,7 @@ impl<'a> Renderer<'a> {
             if view.raster_due {
                 stages.push((
                     "camera",
-                    Box::new(move |e: &mut wgpu::CommandEncoder| {
-                        camera.record_rows(e, &buffers.raster, camera.height, Some(raster_view))
-                    }),
+                    Box::new(move |e: &mut wgpu::CommandEncoder| camera.record(e, &buffers.raster, raster_view)),
                 ));
             }
             if (direct || windows_due) && v == 0 {

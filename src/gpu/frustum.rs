@@ -47,9 +47,9 @@ impl ChunkBoxes {
     }
 
     /// The triangle ranges to draw for `view`, in order, adjacent visible chunks merged: every
-    /// triangle that can put a fragment inside the view (and above `rows` of its `size.y`
-    /// rows, where given: a hemicube's half face).
-    pub fn visible(&self, view: &GpuCamera, rows: Option<u32>) -> Vec<Range<u32>> {
+    /// triangle that can put a fragment inside the view's top `rows` rows (its `size.y` for
+    /// all of it; fewer for a hemicube's half face).
+    pub fn visible(&self, view: &GpuCamera, rows: u32) -> Vec<Range<u32>> {
         let planes = clip_planes(view, rows);
         let mut runs: Vec<Range<u32>> = Vec::new();
         for (c, (lo, hi)) in self.boxes.iter().enumerate() {
@@ -91,8 +91,8 @@ impl Plane {
 
 /// The clip volume of `view_clip` as planes in the scene: the clip coordinates (cx, cy, cz, cw)
 /// it gives are affine in the position, and the rasteriser keeps -cw <= cx, cy <= cw and
-/// 0 <= cz <= cw; `rows` (of `size.y`) adds the scissor's bottom, with a row to spare.
-pub fn clip_planes(view: &GpuCamera, rows: Option<u32>) -> Vec<Plane> {
+/// 0 <= cz <= cw; `rows` below `size.y` adds the scissor's bottom, with a row to spare.
+pub fn clip_planes(view: &GpuCamera, rows: u32) -> Vec<Plane> {
     let f = |v: [f32; 4]| [v[0] as f64, v[1] as f64, v[2] as f64, v[3] as f64];
     let (eye, right, up, forward, jitter) = (f(view.eye), f(view.right), f(view.up), f(view.forward), f(view.jitter));
     let size = [view.size[0].max(1) as f64, view.size[1].max(1) as f64];
@@ -126,7 +126,7 @@ pub fn clip_planes(view: &GpuCamera, rows: Option<u32>) -> Vec<Plane> {
         combine(1.0, cz, 0.0, cz),
         combine(1.0, cw, -1.0, cz),
     ];
-    if let Some(rows) = rows.filter(|&r| r < view.size[1]) {
+    if rows < view.size[1] {
         // Rows [0, rows) from the top: y_ndc >= 1 - 2 (rows + 1) / height, one row to spare.
         let bottom = 1.0 - 2.0 * (rows as f64 + 1.0) / size[1];
         planes.push(combine(1.0, cy, -bottom, cw));
@@ -155,9 +155,9 @@ mod tests {
         [window[0] / right[3] + shift[0] * z, window[1] / up[3] + shift[1] * z, forward[3], z]
     }
 
-    fn inside(c: [f64; 4], rows: Option<(u32, u32)>) -> bool {
+    fn inside(c: [f64; 4], rows: u32, height: u32) -> bool {
         let [x, y, z, w] = c;
-        let in_rows = rows.is_none_or(|(rows, height)| y >= (1.0 - 2.0 * rows as f64 / height as f64) * w);
+        let in_rows = y >= (1.0 - 2.0 * rows as f64 / height as f64) * w;
         -w <= x && x <= w && -w <= y && y <= w && 0.0 <= z && z <= w && in_rows
     }
 
@@ -198,7 +198,7 @@ mod tests {
         for round in 0..400 {
             let orthographic = round % 3 == 0;
             let view = view(&mut rng, orthographic);
-            let rows = (round % 2 == 0).then(|| 1 + (rng.next() * view.size[1] as f64) as u32);
+            let rows = if round % 2 == 0 { 1 + (rng.next() * view.size[1] as f64) as u32 } else { view.size[1] };
             let planes = clip_planes(&view, rows);
             for _ in 0..50 {
                 let centre: [f64; 3] = std::array::from_fn(|_| (rng.next() - 0.5) * 12.0);
@@ -214,7 +214,7 @@ mod tests {
                         })
                     })
                     .collect();
-                let any_inside = points.iter().any(|&p| inside(view_clip(&view, p), rows.map(|r| (r, view.size[1]))));
+                let any_inside = points.iter().any(|&p| inside(view_clip(&view, p), rows, view.size[1]));
                 let skip = planes.iter().any(|plane| plane.excludes(&lo, &hi));
                 if skip {
                     skipped += 1;
@@ -253,8 +253,8 @@ mod tests {
             size: [64, 64, VIEW_ORTHOGRAPHIC, 0],
         };
         // Chunks at x = -8, -4, 0, 4, 8, 12: the middle three are inside |x| <= 4.5.
-        assert_eq!(boxes.visible(&view, None), vec![CHUNK_TRIANGLES..CHUNK_TRIANGLES * 4]);
+        assert_eq!(boxes.visible(&view, 64), vec![CHUNK_TRIANGLES..CHUNK_TRIANGLES * 4]);
         let wide = GpuCamera { right: [1.0, 0.0, 0.0, 100.0], ..view };
-        assert_eq!(boxes.visible(&wide, None), vec![0..n]);
+        assert_eq!(boxes.visible(&wide, 64), vec![0..n]);
     }
 }

@@ -464,15 +464,15 @@ impl RasterMesh {
         pass.draw(0..self.triangles * 3, instances);
     }
 
-    /// Draws, once per instance of `instances`, the triangles that can reach `view` (above
-    /// `rows` of its rows where given): the chunks wholly outside its clip volume are skipped
+    /// Draws, once per instance of `instances`, the triangles that can reach the top `rows`
+    /// rows of `view` (all of them at its `size.y`): the chunks wholly outside are skipped
     /// (`frustum`), which changes no texel of the item buffer.
     pub fn draw_in_view(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
         instances: std::ops::Range<u32>,
         view: &GpuCamera,
-        rows: Option<u32>,
+        rows: u32,
     ) {
         if !self.cull {
             return self.draw(pass, instances);

@@ -185,31 +185,22 @@ impl CameraItemBuffer {
         }
     }
 
-    /// Records the pass: every patch rasterised with its id.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh) {
-        self.record_rows(encoder, raster, self.height, None);
+    /// Records the pass: every patch rasterised with its id, as `view` (the camera its
+    /// uniform holds) sees it; only the triangles that can reach the view are drawn
+    /// (`RasterMesh::draw_in_view`: the same texels).
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh, view: &GpuCamera) {
+        self.record_rows(encoder, raster, self.height, view);
     }
 
-    /// As `record`, rasterising only the top `rows` rows (half faces of a hemicube); with
-    /// `view`, the camera its uniform holds, only the triangles that can reach it
-    /// (`RasterMesh::draw_in_view`: the same texels).
-    pub fn record_rows(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        raster: &RasterMesh,
-        rows: u32,
-        view: Option<&GpuCamera>,
-    ) {
+    /// As `record`, rasterising only the top `rows` rows (half faces of a hemicube).
+    pub fn record_rows(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh, rows: u32, view: &GpuCamera) {
         let mut pass = begin_item_pass(encoder, "firstshot.camera_item_buffer.pass", &self.ids_view, &self.depth_view);
         pass.set_pipeline(&self.pipeline);
         let s = self.supersample;
         let rows = rows.clamp(1, self.height);
         pass.set_scissor_rect(0, 0, self.width * s, rows * s);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        match view {
-            Some(view) => raster.draw_in_view(&mut pass, 0..1, view, (rows < self.height).then_some(rows * s)),
-            None => raster.draw(&mut pass, 0..1),
-        }
+        raster.draw_in_view(&mut pass, 0..1, view, rows * s);
     }
 }
 

@@ -70,8 +70,8 @@ impl WindowAtlas {
             let [x, y, rows, _] = face.tile;
             let side = face.view.size[0];
             pass.set_viewport(x as f32, y as f32, side as f32, side as f32, 0.0, 1.0);
-            pass.set_scissor_rect(x, y, side, rows.clamp(1, side));
-            let rows = (rows < side).then_some(rows.max(1));
+            let rows = rows.clamp(1, side);
+            pass.set_scissor_rect(x, y, side, rows);
             raster.draw_in_view(&mut pass, *index..*index + 1, &face.view, rows);
         }
     }
