@@ -984,8 +984,8 @@ fn test15_a_scene_far_from_the_origin_renders_as_at_the_origin() {
     // image must be the same. Far from the origin every position the GPU holds in f32 is
     // rounded more coarsely; what follows the scene (the bundles' grid about its bounding
     // sphere, the lights' windows about their points, the camera's rays from its eye) keeps
-    // that rounding at about the offset times 6e-8, here a fraction of a millimetre in a box
-    // of 56 cm. Architectural models often come with such offsets (survey coordinates). The
+    // that rounding at about the offset times 6e-8, here 0.02 units in a box 560 wide.
+    // Architectural models often come with such offsets (survey coordinates). The
     // box of cornell_point has a point light, glossy surfaces and, added here, an area light;
     // its walls light each other, so the gather matters (checked below).
     let Some(ctx) = common::gpu() else { return };
