@@ -537,6 +537,7 @@ impl Iteration {
                     (&max_bits).into(),
                     outgoing.resource(),
                     scene.state.resource(),
+                    (&scene.materials).into(),
                 ],
                 scene.patch_count,
                 like.map(|l| &l.finalize),

@@ -14,6 +14,7 @@
 @group(0) @binding(3) var<storage, read> max_bits: array<u32>;
 @group(0) @binding(4) var<storage, read> outgoing: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> state: array<PatchState>;
+@group(0) @binding(6) var<storage, read> materials: array<Material>;
 
 // The weight of each step's estimate 2 K_j in Lbar_j (an exponential mean over about 8 steps).
 const MEAN_RADIANCE_WEIGHT: f32 = 0.125;
@@ -69,12 +70,25 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // average the glossy reflections of these samples of win (docs/ALGORITHM.md 6). Written
     // out, for GLOSSY_HISTORY entries, with no local array (a CPU adapter may keep one in
     // scratch memory). Step 0's entry (the zero state) is shifted in too but never counted.
-    let newest = vec2<u32>(pack_history_radiance(old_incoming.rgb), state_at(j).direction);
+    // Only a glossy patch's history is read (bundle_reflect): the others' stays zero, which
+    // saves moving it at every bundle (a third of this kernel's time on cornell_point).
     let written = select(old_incoming.w, min(old_incoming.w + 1.0, f32(GLOSSY_HISTORY)), bundle.use_state != 0u);
+    let direction = octahedral_pack(-side * bundle.direction.xyz);
+    if (materials[patches_at(j).material].kind != MATERIAL_PHONG) {
+        state_set(j, PatchState(
+            vec4<f32>(incoming, written),
+            diffuse,
+            direction,
+            vec4<f32>(mean_radiance, 0.0),
+            sum,
+            array<vec2<u32>, GLOSSY_HISTORY>()));
+        return;
+    }
+    let newest = vec2<u32>(pack_history_radiance(old_incoming.rgb), state_at(j).direction);
     state_set(j, PatchState(
         vec4<f32>(incoming, written),
         diffuse,
-        octahedral_pack(-side * bundle.direction.xyz),
+        direction,
         vec4<f32>(mean_radiance, 0.0),
         sum,
         array<vec2<u32>, GLOSSY_HISTORY>(

@@ -3,7 +3,7 @@
 use crate::gpu::bindings::{Kernel, KernelSpec, Resource, compute, read, read_write, uniform};
 use crate::gpu::kernel;
 use crate::gpu::scene_buffers::{OUTGOING, PATCH_STATE, PATCH_TABLE, TRANSFER_SUMS};
-use crate::layout::{GpuBundle, GpuPatch, GpuPatchState};
+use crate::layout::{GpuBundle, GpuMaterial, GpuPatch, GpuPatchState};
 
 pub const SPEC: KernelSpec = KernelSpec {
     stem: "bundle_finalize",
@@ -20,6 +20,8 @@ pub const SPEC: KernelSpec = KernelSpec {
         read::<[f32; 4]>("outgoing").paged(OUTGOING.pages),
         // One writer per patch.
         read_write::<GpuPatchState>("state").paged(PATCH_STATE.pages),
+        // Which patches keep a glossy history (the others' goes unread).
+        read::<GpuMaterial>("materials"),
     ]],
 };
 
@@ -31,9 +33,9 @@ pub struct BundleFinalize {
 }
 
 impl BundleFinalize {
-    /// `buffers`: bundle, patches, sums, max_bits, outgoing, state (`SPEC`'s group 0).
+    /// `buffers`: bundle, patches, sums, max_bits, outgoing, state, materials (`SPEC`'s group 0).
     /// `like`: a stage over arrays of the same paging whose pipeline this one shares.
-    pub fn new(device: &wgpu::Device, buffers: [Resource; 6], patch_count: u32, like: Option<&Self>) -> Self {
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 7], patch_count: u32, like: Option<&Self>) -> Self {
         let (kernel, pipeline) = match like {
             Some(like) => (like.kernel.clone(), like.pipeline.clone()),
             None => {
