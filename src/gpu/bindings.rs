@@ -656,11 +656,12 @@ mod tests {
 
     #[test]
     fn missing_and_extra_bindings_are_reported() {
-        // The pages of paged bindings follow the whole list: without `state`, its last page
-        // (binding 24 of the WGSL) is beyond the spec; with one more binding, the spec's
-        // last page moves past the WGSL's.
+        // The pages of paged bindings follow the whole list: without the last binding
+        // (`materials`) every page moves down one, and `state`'s last page (binding 25 of the
+        // WGSL) is beyond the spec; with one more binding, the spec's last page moves past
+        // the WGSL's.
         assert_reported(&errors_of(|_, g, _| _ = g.pop()), "`state_10` is in the WGSL but not in the spec");
-        assert_reported(&errors_of(|_, g, _| g.push(read::<u32>("extra"))), "binding 25 `state_10`, the WGSL does not");
+        assert_reported(&errors_of(|_, g, _| g.push(read::<u32>("extra"))), "binding 26 `state_10`, the WGSL does not");
         assert_reported(&errors_of(|_, g, _| g[5] = g[5].paged(2)), "`state_2` is in the WGSL but not in the spec");
     }
 
