@@ -280,7 +280,7 @@ fn test06_the_state_keeps_the_last_steps_j_for_the_glossy_reflection() {
     for p in patches.patches.iter_mut().step_by(2) {
         p.material = Some(1);
     }
-    let glossy = |j: usize| j % 2 == 0;
+    let glossy = |j: usize| j.is_multiple_of(2);
     // The state after n steps (no burn-in: every step is an image step); step k's numbers
     // depend on (seed, k) alone, so the runs of 1, 2, ... steps pass through the same states.
     let state_after = |n: u32| {
