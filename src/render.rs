@@ -1081,7 +1081,7 @@ impl<'a> Renderer<'a> {
 
     /// Every view's gather through the bundle last run (the pixels of its class).
     fn gather_stages(&self) -> Vec<Stage<'_>> {
-        self.views.iter().map(|view| gather_stage(&view.estimate)).collect()
+        self.views.iter().flat_map(|view| gather_stages(&view.estimate)).collect()
     }
 
     /// The stages that add one estimate of every pixel of every view to its image sum: per
@@ -1116,7 +1116,7 @@ impl<'a> Renderer<'a> {
                 stages.push(("direct", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_direct(e))));
             }
             if gather {
-                stages.push(gather_stage(estimate));
+                stages.extend(gather_stages(estimate));
             }
         }
         stages
@@ -1504,9 +1504,15 @@ impl<'a> Renderer<'a> {
     }
 }
 
-/// A view's gather through the bundle last run (`ImageEstimate::record_gather`).
-fn gather_stage(estimate: &ImageEstimate) -> Stage<'_> {
-    ("gather", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather(e)))
+/// A view's gather through the bundle last run: a stage for each of its passes
+/// (`ImageEstimate::gather_passes`), so that the profile times them apart.
+fn gather_stages(estimate: &ImageEstimate) -> Vec<Stage<'_>> {
+    let passes = estimate.gather_passes().iter().enumerate();
+    passes
+        .map(|(pass, &name)| -> Stage<'_> {
+            (name, Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather_pass(e, pass)))
+        })
+        .collect()
 }
 
 /// The passes of a direct-light image that ran, and whether a stop ended them early.

@@ -168,8 +168,19 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
 fn print_rows(rows: &[Row]) {
     let stages: Vec<String> = rows.iter().find(|r| r.error.is_none()).map_or(vec![], |r| {
         // Product order, not alphabetical.
-        let order =
-            ["clear", "reflect", "visibility", "transfer", "finalize", "camera", "light_windows", "direct", "gather"];
+        let order = [
+            "clear",
+            "reflect",
+            "visibility",
+            "transfer",
+            "finalize",
+            "camera",
+            "light_windows",
+            "direct",
+            "gather",
+            "gather_edges",
+            "gather_first_bounce",
+        ];
         order.iter().filter(|s| r.stage_ms.contains_key(**s)).map(|s| s.to_string()).collect()
     });
     let mut headers = vec!["study", "level", "bundle", "patches", "first shot ms", "step ms", "frags/step", "ns/frag"];

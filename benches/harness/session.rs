@@ -188,6 +188,9 @@ pub fn stage_bytes(stage: &str, s: Sizes) -> f64 {
         // Per pixel: id, patch, material, the line's slice and 4 fragments with their
         // patches' planes and one O, the running sum read and written.
         "gather" => s.pixels * (4.0 + patch + material + 8.0 + 4.0 * (8.0 + 16.0) + 16.0 + 32.0),
+        // The split gather's list passes (`ImageEstimate::gather_passes`): the list's count.
+        // Their pixels, a few per cent of the image, are counted only on the GPU.
+        "gather_edges" | "gather_first_bounce" => 4.0,
         _ => f64::NAN,
     }
 }

@@ -385,39 +385,71 @@ impl ImageEstimate {
 
     /// Records one estimate of the indirect light G of the pixels of the last bundle's class
     /// (every pixel with one bundle a step), gathered through that bundle (reads the camera
-    /// item buffer of this pass).
-    /// (Two passes a band: `gather`, which lists the pixels near their patch's edge, then
-    /// `gather_edges` for those.)
+    /// item buffer of this pass): every pass of `gather_passes`, band by band.
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
-        let split = match (self.passes, &self.edges_pipeline) {
-            (GatherPasses::Split { list_workgroups }, Some(edges)) => Some((list_workgroups.max(1), edges)),
-            _ => None,
-        };
         for band in &self.bands {
-            if split.is_some() {
-                encoder.clear_buffer(&band.edges, 0, Some(4));
-                encoder.clear_buffer(&band.near_senders, 0, Some(4));
+            for pass in 0..self.gather_passes().len() {
+                self.record_gather_band(encoder, band, pass);
             }
-            // One invocation per block of stride x stride pixels that meets the band's rows.
-            let stride = self.pixel_stride;
-            let block_rows = (band.first_row + band.rows).div_ceil(stride) - band.first_row / stride;
-            let groups = SPEC.grid("gather", [self.width.div_ceil(stride), block_rows]);
-            let bind_groups = [&band.groups[1], &self.direct_group, &self.gather_group];
-            kernel::dispatch(encoder, "firstshot.image_estimate.gather", &self.gather_pipeline, &bind_groups, groups);
-            let Some((list_workgroups, edges_pipeline)) = split else {
-                continue;
-            };
-            let edges = (list_workgroups, 1);
-            kernel::dispatch(encoder, "firstshot.image_estimate.gather_edges", edges_pipeline, &bind_groups, edges);
-            if let Some(pipeline) = &self.first_bounce_pipeline {
+        }
+    }
+
+    /// The gather's passes, in order, as the stage profile names them: `gather` alone where
+    /// it is fused; split, `gather` (which lists the pixels near their patch's edge and those
+    /// with a near sender), `gather_edges` for the first list and, where senders' first
+    /// bounces are evaluated per point, `gather_first_bounce` for the second.
+    pub fn gather_passes(&self) -> &'static [&'static str] {
+        match (self.passes, &self.edges_pipeline, &self.first_bounce_pipeline) {
+            (GatherPasses::Split { .. }, Some(_), Some(_)) => &["gather", "gather_edges", "gather_first_bounce"],
+            (GatherPasses::Split { .. }, Some(_), None) => &["gather", "gather_edges"],
+            _ => &["gather"],
+        }
+    }
+
+    /// Records pass `pass` of `gather_passes` for every band (the stage profile times each
+    /// pass alone; `record_gather` records them all, which leaves the same sums: each band's
+    /// lists are its own).
+    pub fn record_gather_pass(&self, encoder: &mut wgpu::CommandEncoder, pass: usize) {
+        for band in &self.bands {
+            self.record_gather_band(encoder, band, pass);
+        }
+    }
+
+    fn record_gather_band(&self, encoder: &mut wgpu::CommandEncoder, band: &Band, pass: usize) {
+        let bind_groups = [&band.groups[1], &self.direct_group, &self.gather_group];
+        let lists = match self.passes {
+            GatherPasses::Split { list_workgroups } => (list_workgroups.max(1), 1),
+            GatherPasses::Fused => (1, 1),
+        };
+        match (pass, &self.edges_pipeline, &self.first_bounce_pipeline) {
+            (0, edges, _) => {
+                if edges.is_some() {
+                    encoder.clear_buffer(&band.edges, 0, Some(4));
+                    encoder.clear_buffer(&band.near_senders, 0, Some(4));
+                }
+                // One invocation per block of stride x stride pixels that meets the band's rows.
+                let stride = self.pixel_stride;
+                let block_rows = (band.first_row + band.rows).div_ceil(stride) - band.first_row / stride;
+                let groups = SPEC.grid("gather", [self.width.div_ceil(stride), block_rows]);
                 kernel::dispatch(
                     encoder,
-                    "firstshot.image_estimate.gather_first_bounce",
-                    pipeline,
+                    "firstshot.image_estimate.gather",
+                    &self.gather_pipeline,
                     &bind_groups,
-                    edges,
+                    groups,
                 );
             }
+            (1, Some(edges), _) => {
+                kernel::dispatch(encoder, "firstshot.image_estimate.gather_edges", edges, &bind_groups, lists);
+            }
+            (2, Some(_), Some(first_bounce)) => kernel::dispatch(
+                encoder,
+                "firstshot.image_estimate.gather_first_bounce",
+                first_bounce,
+                &bind_groups,
+                lists,
+            ),
+            _ => panic!("the gather has no pass {pass} ({:?})", self.gather_passes()),
         }
     }
 
