@@ -1081,7 +1081,7 @@ impl<'a> Renderer<'a> {
 
     /// Every view's gather through the bundle last run (the pixels of its class).
     fn gather_stages(&self) -> Vec<Stage<'_>> {
-        self.views.iter().flat_map(|view| gather_stages(&view.estimate)).collect()
+        self.views.iter().flat_map(|view| gather_pass_stages(&view.estimate)).collect()
     }
 
     /// The stages that add one estimate of every pixel of every view to its image sum: per
@@ -1116,7 +1116,7 @@ impl<'a> Renderer<'a> {
                 stages.push(("direct", Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_direct(e))));
             }
             if gather {
-                stages.extend(gather_stages(estimate));
+                stages.extend(gather_pass_stages(estimate));
             }
         }
         stages
@@ -1506,7 +1506,7 @@ impl<'a> Renderer<'a> {
 
 /// A view's gather through the bundle last run: a stage for each of its passes
 /// (`ImageEstimate::gather_passes`), so that the profile times them apart.
-fn gather_stages(estimate: &ImageEstimate) -> Vec<Stage<'_>> {
+fn gather_pass_stages(estimate: &ImageEstimate) -> Vec<Stage<'_>> {
     let passes = estimate.gather_passes().iter().enumerate();
     passes
         .map(|(pass, &name)| -> Stage<'_> {
