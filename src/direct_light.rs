@@ -471,16 +471,18 @@ impl DirectLights {
     }
 
     /// The `override` constants of image_estimate's `direct` entry point for this table: the
-    /// kinds of light it holds (bit `1 << LIGHT_*`) and the face counts of their windows (bit
-    /// `1 << faces`), so that the kernel is compiled without the others' code. An empty table
-    /// keeps the defaults (every kind): nothing is evaluated then.
-    pub fn specialization(&self) -> [(&'static str, f64); 2] {
+    /// kinds of light it holds (bit `1 << LIGHT_*`), the face counts of their windows (bit
+    /// `1 << faces`) and the atlases their faces lie in (bit `1 << KEPT`, `1 << PER_PASS`),
+    /// so that the kernel is compiled without the others' code. An empty table keeps the
+    /// defaults (every kind): nothing is evaluated then.
+    pub fn specialization(&self) -> [(&'static str, f64); 3] {
         let bit = |n: u32| 1u32.checked_shl(n).unwrap_or(u32::MAX);
         let kinds = self.table.iter().fold(0u32, |bits, l| bits | bit(l.kind));
         let faces = self.table.iter().fold(0u32, |bits, l| bits | bit(l.faces));
-        match self.table.is_empty() {
-            true => [("LIGHT_KINDS", u32::MAX as f64), ("WINDOW_FACE_COUNTS", u32::MAX as f64)],
-            false => [("LIGHT_KINDS", kinds as f64), ("WINDOW_FACE_COUNTS", faces as f64)],
+        let atlases = self.faces.iter().fold(0u32, |bits, f| bits | bit(f.tile[3]));
+        match self.table.is_empty() || atlases == 0 {
+            true => [("LIGHT_KINDS", u32::MAX as f64), ("WINDOW_FACE_COUNTS", u32::MAX as f64), ("ATLASES", 3.0)],
+            false => [("LIGHT_KINDS", kinds as f64), ("WINDOW_FACE_COUNTS", faces as f64), ("ATLASES", atlases as f64)],
         }
     }
 

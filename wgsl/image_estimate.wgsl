@@ -70,6 +70,9 @@ var<private> this_bundle: Bundle;
 // The defaults keep every kind.
 override LIGHT_KINDS: u32 = 0xffffffffu;
 override WINDOW_FACE_COUNTS: u32 = 0xffffffffu;
+// Likewise the atlases its faces lie in: bit 1 << 0 the kept faces' (points, spots, suns),
+// bit 1 << 1 the per-pass faces' (area lights, emitting shapes).
+override ATLASES: u32 = 3u;
 // True in the gather's pipeline (it runs only where the image gathers): `gather` adds the
 // emission Le a pixel sees on every step, and `direct` leaves it out (params.seen_in_gather).
 // At the outline of a light seen directly Le is most of the pixel, and only the camera
@@ -148,7 +151,17 @@ fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
     return t > SEGMENT_EPSILON && t < 1.0 - SEGMENT_EPSILON;
 }
 
+// The id at texel `at` of atlas `atlas` (WindowFace::tile.w: 0 the kept faces', 1 the
+// per-pass faces'). Where the light table uses one atlas alone (ATLASES), the other's load is
+// compiled out: a CPU adapter loads from both for every texel otherwise, about a tenth of
+// the Sierpinski scene's direct pass.
 fn atlas_id(atlas: u32, at: vec2<i32>) -> u32 {
+    if (ATLASES == 1u) {
+        return textureLoad(kept_atlas, at, 0).x;
+    }
+    if (ATLASES == 2u) {
+        return textureLoad(pass_atlas, at, 0).x;
+    }
     if (atlas == 0u) {
         return textureLoad(kept_atlas, at, 0).x;
     }
@@ -156,11 +169,11 @@ fn atlas_id(atlas: u32, at: vec2<i32>) -> u32 {
 }
 
 // Whether the surface `id` (patch index + 1) of a window texel lies on the segment from y to x,
-// x on patch j. With `by_plane` (a directional light's parallel view, `texel` its texel's
+// x on patch j of normal n (the caller's, not loaded again for each of a pixel's texels). With `by_plane` (a directional light's parallel view, `texel` its texel's
 // side), whether the segment crosses that surface's plane: see `visible`. Else (a point's
 // window, `texel_at_x` a texel's footprint at x's depth) whether it crosses the patch, or
 // its surface a little past one of its smooth edges (`crosses_surface`).
-fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f32, texel_at_x: f32) -> bool {
+fn blocks(id: u32, j: u32, n: vec3<f32>, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f32, texel_at_x: f32) -> bool {
     if (id == NO_PATCH || id - 1u == j || id > params.patch_count) {
         return false;
     }
@@ -179,7 +192,7 @@ fn blocks(id: u32, j: u32, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f3
         return false;
     }
     if (abs(side_x) <= SEGMENT_EPSILON * length(x - y)
-        && abs(dot(plane.xyz, patches_at(j).normal.xyz)) >= SMOOTH_EDGE_COS) {
+        && abs(dot(plane.xyz, n)) >= SMOOTH_EDGE_COS) {
         return false;
     }
     if (by_plane) {
@@ -293,7 +306,7 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
     return best;
 }
 
-// V(y, x) for the light whose window is faces[first..first + count], x on patch j: 1 unless a
+// V(y, x) for the light whose window is faces[first..first + count], x on patch j (normal n): 1 unless a
 // surface of the window's item buffer around the direction of x lies on the segment between
 // them. Fields are read one by one: a CPU adapter loads every field of a whole-struct read.
 //
@@ -305,7 +318,7 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
 // test08). So a surface seen there blocks where the segment crosses its plane inside its
 // triangle or a little past an edge it shares with a neighbour of its plane
 // (`crosses_surface`), and not past its outline.
-fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
+fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, n: vec3<f32>, x: vec3<f32>) -> bool {
     let w = x - y;
     let f = window_face(w, first, count);
     let z = dot(w, faces[f].view.forward.xyz);
@@ -339,7 +352,7 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
                 let at = clamp(centre + vec2<i32>(dx, dy), vec2<i32>(0), last);
-                if (blocks(atlas_id(tile.w, origin + at), j, y, x, false, 0.0, texel_at_x)) {
+                if (blocks(atlas_id(tile.w, origin + at), j, n, y, x, false, 0.0, texel_at_x)) {
                     return false;
                 }
             }
@@ -357,16 +370,16 @@ fn visible(y: vec3<f32>, first: u32, count: u32, j: u32, x: vec3<f32>) -> bool {
     let d = atlas_id(tile.w, origin + hi);
     // A texel's side in the scene (the view is orthographic, 2 right.w across).
     let texel = 2.0 * right.w / f32(side);
-    if (blocks(a, j, y, x, true, texel, 0.0)) {
+    if (blocks(a, j, n, y, x, true, texel, 0.0)) {
         return false;
     }
-    if (b != a && blocks(b, j, y, x, true, texel, 0.0)) {
+    if (b != a && blocks(b, j, n, y, x, true, texel, 0.0)) {
         return false;
     }
-    if (c != a && c != b && blocks(c, j, y, x, true, texel, 0.0)) {
+    if (c != a && c != b && blocks(c, j, n, y, x, true, texel, 0.0)) {
         return false;
     }
-    return d == a || d == b || d == c || !blocks(d, j, y, x, true, texel, 0.0);
+    return d == a || d == b || d == c || !blocks(d, j, n, y, x, true, texel, 0.0);
 }
 
 // Multiple importance sampling of an emitting shape's light (docs/ALGORITHM.md 6): the
@@ -434,7 +447,7 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
                 g *= light_share(r2, cos_l, lights[i].normal.w);
             }
         }
-        if (g > 0.0 && visible(y, lights[i].first_face, lights[i].faces, j, x)) {
+        if (g > 0.0 && visible(y, lights[i].first_face, lights[i].faces, j, n, x)) {
             sum += lights[i].strength.rgb * g * brdf(m, n, w_in, w_out);
         }
     }
