@@ -1507,9 +1507,9 @@ impl<'a> Renderer<'a> {
 /// A view's gather through the bundle last run: a stage for each of its passes
 /// (`ImageEstimate::gather_passes`), so that the profile times them apart.
 fn gather_pass_stages(estimate: &ImageEstimate) -> Vec<Stage<'_>> {
-    let passes = estimate.gather_passes().iter().enumerate();
+    let passes = estimate.gather_passes().into_iter().enumerate();
     passes
-        .map(|(pass, &name)| -> Stage<'_> {
+        .map(|(pass, name)| -> Stage<'_> {
             (name, Box::new(move |e: &mut wgpu::CommandEncoder| estimate.record_gather_pass(e, pass)))
         })
         .collect()

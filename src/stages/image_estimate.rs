@@ -151,6 +151,25 @@ impl GatherPasses {
     }
 }
 
+/// One pass of a view's gather on a step (`ImageEstimate::gather_passes`).
+enum GatherPass<'a> {
+    /// `gather` over the band's pixels; `lists`: it lists pixels for the passes after it
+    /// (split), whose lists' counts it clears first.
+    Main { lists: bool },
+    /// A pass over one of those lists (`gather_edges`, `gather_first_bounce`), on a fixed grid
+    /// of `workgroups` (the list's length is known only on the GPU).
+    List { name: &'static str, pipeline: &'a wgpu::ComputePipeline, workgroups: u32 },
+}
+
+impl GatherPass<'_> {
+    fn name(&self) -> &'static str {
+        match self {
+            GatherPass::Main { .. } => "gather",
+            GatherPass::List { name, .. } => name,
+        }
+    }
+}
+
 /// Which of `GatherPasses` a run asks for (`--gather`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum GatherChoice {
@@ -387,8 +406,9 @@ impl ImageEstimate {
     /// (every pixel with one bundle a step), gathered through that bundle (reads the camera
     /// item buffer of this pass): every pass of `gather_passes`, band by band.
     pub fn record_gather(&self, encoder: &mut wgpu::CommandEncoder) {
+        let passes = self.passes_of_gather();
         for band in &self.bands {
-            for pass in 0..self.gather_passes().len() {
+            for pass in &passes {
                 self.record_gather_band(encoder, band, pass);
             }
         }
@@ -398,32 +418,44 @@ impl ImageEstimate {
     /// it is fused; split, `gather` (which lists the pixels near their patch's edge and those
     /// with a near sender), `gather_edges` for the first list and, where senders' first
     /// bounces are evaluated per point, `gather_first_bounce` for the second.
-    pub fn gather_passes(&self) -> &'static [&'static str] {
-        match (self.passes, &self.edges_pipeline, &self.first_bounce_pipeline) {
-            (GatherPasses::Split { .. }, Some(_), Some(_)) => &["gather", "gather_edges", "gather_first_bounce"],
-            (GatherPasses::Split { .. }, Some(_), None) => &["gather", "gather_edges"],
-            _ => &["gather"],
-        }
+    pub fn gather_passes(&self) -> Vec<&'static str> {
+        self.passes_of_gather().iter().map(GatherPass::name).collect()
     }
 
     /// Records pass `pass` of `gather_passes` for every band (the stage profile times each
     /// pass alone; `record_gather` records them all, which leaves the same sums: each band's
     /// lists are its own).
     pub fn record_gather_pass(&self, encoder: &mut wgpu::CommandEncoder, pass: usize) {
+        let passes = self.passes_of_gather();
+        let pass =
+            passes.get(pass).unwrap_or_else(|| panic!("the gather has no pass {pass} ({:?})", self.gather_passes()));
         for band in &self.bands {
             self.record_gather_band(encoder, band, pass);
         }
     }
 
-    fn record_gather_band(&self, encoder: &mut wgpu::CommandEncoder, band: &Band, pass: usize) {
+    /// The gather's passes, from the pipelines this estimate was built with: the list passes
+    /// are those it has a pipeline for (none where the gather is fused).
+    fn passes_of_gather(&self) -> Vec<GatherPass<'_>> {
+        let mut passes = vec![GatherPass::Main { lists: self.edges_pipeline.is_some() }];
+        if let GatherPasses::Split { list_workgroups } = self.passes {
+            let lists = [("gather_edges", &self.edges_pipeline), ("gather_first_bounce", &self.first_bounce_pipeline)];
+            passes.extend(lists.into_iter().filter_map(|(name, pipeline)| {
+                pipeline.as_ref().map(|pipeline| GatherPass::List {
+                    name,
+                    pipeline,
+                    workgroups: list_workgroups.max(1),
+                })
+            }));
+        }
+        passes
+    }
+
+    fn record_gather_band(&self, encoder: &mut wgpu::CommandEncoder, band: &Band, pass: &GatherPass<'_>) {
         let bind_groups = [&band.groups[1], &self.direct_group, &self.gather_group];
-        let lists = match self.passes {
-            GatherPasses::Split { list_workgroups } => (list_workgroups.max(1), 1),
-            GatherPasses::Fused => (1, 1),
-        };
-        match (pass, &self.edges_pipeline, &self.first_bounce_pipeline) {
-            (0, edges, _) => {
-                if edges.is_some() {
+        match *pass {
+            GatherPass::Main { lists } => {
+                if lists {
                     encoder.clear_buffer(&band.edges, 0, Some(4));
                     encoder.clear_buffer(&band.near_senders, 0, Some(4));
                 }
@@ -439,17 +471,10 @@ impl ImageEstimate {
                     groups,
                 );
             }
-            (1, Some(edges), _) => {
-                kernel::dispatch(encoder, "firstshot.image_estimate.gather_edges", edges, &bind_groups, lists);
+            GatherPass::List { name, pipeline, workgroups } => {
+                let label = format!("firstshot.image_estimate.{name}");
+                kernel::dispatch(encoder, &label, pipeline, &bind_groups, (workgroups, 1));
             }
-            (2, Some(_), Some(first_bounce)) => kernel::dispatch(
-                encoder,
-                "firstshot.image_estimate.gather_first_bounce",
-                first_bounce,
-                &bind_groups,
-                lists,
-            ),
-            _ => panic!("the gather has no pass {pass} ({:?})", self.gather_passes()),
         }
     }
 
