@@ -169,10 +169,11 @@ fn atlas_id(atlas: u32, at: vec2<i32>) -> u32 {
 }
 
 // Whether the surface `id` (patch index + 1) of a window texel lies on the segment from y to x,
-// x on patch j of normal n (the caller's, not loaded again for each of a pixel's texels). With `by_plane` (a directional light's parallel view, `texel` its texel's
-// side), whether the segment crosses that surface's plane: see `visible`. Else (a point's
-// window, `texel_at_x` a texel's footprint at x's depth) whether it crosses the patch, or
-// its surface a little past one of its smooth edges (`crosses_surface`).
+// x on patch j of normal n (the caller's: not loaded again for each of a pixel's texels).
+// With `by_plane` (a directional light's parallel view, `texel` its texel's side), whether
+// the segment crosses that surface's plane: see `visible`. Else (a point's window,
+// `texel_at_x` a texel's footprint at x's depth) whether it crosses the patch, or its
+// surface a little past one of its smooth edges (`crosses_surface`).
 fn blocks(id: u32, j: u32, n: vec3<f32>, y: vec3<f32>, x: vec3<f32>, by_plane: bool, texel: f32, texel_at_x: f32) -> bool {
     if (id == NO_PATCH || id - 1u == j || id > params.patch_count) {
         return false;
@@ -306,9 +307,10 @@ fn window_face(w: vec3<f32>, first: u32, count: u32) -> u32 {
     return best;
 }
 
-// V(y, x) for the light whose window is faces[first..first + count], x on patch j (normal n): 1 unless a
-// surface of the window's item buffer around the direction of x lies on the segment between
-// them. Fields are read one by one: a CPU adapter loads every field of a whole-struct read.
+// V(y, x) for the light whose window is faces[first..first + count], x on patch j (normal
+// n): 1 unless a surface of the window's item buffer around the direction of x lies on the
+// segment between them. Fields are read one by one: a CPU adapter loads every field of a
+// whole-struct read.
 //
 // A directional light's window is one parallel view (VIEW_ORTHOGRAPHIC) and y is the point
 // of its plane behind the scene from which the light reaches x: the texels are those around
