@@ -480,7 +480,7 @@ impl DirectLights {
         let kinds = self.table.iter().fold(0u32, |bits, l| bits | bit(l.kind));
         let faces = self.table.iter().fold(0u32, |bits, l| bits | bit(l.faces));
         let atlases = self.faces.iter().fold(0u32, |bits, f| bits | bit(f.tile[3]));
-        match self.table.is_empty() || atlases == 0 {
+        match self.table.is_empty() {
             true => [("LIGHT_KINDS", u32::MAX as f64), ("WINDOW_FACE_COUNTS", u32::MAX as f64), ("ATLASES", 3.0)],
             false => [("LIGHT_KINDS", kinds as f64), ("WINDOW_FACE_COUNTS", faces as f64), ("ATLASES", atlases as f64)],
         }
