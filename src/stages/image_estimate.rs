@@ -157,8 +157,8 @@ enum GatherPass<'a> {
     /// (split), whose lists' counts it clears first.
     Main { lists: bool },
     /// A pass over one of those lists (`gather_edges`, `gather_first_bounce`), on a fixed grid
-    /// of `workgroups` (the list's length is known only on the GPU).
-    List { name: &'static str, pipeline: &'a wgpu::ComputePipeline, workgroups: u32 },
+    /// of `workgroups` (the list's length is known only on the GPU); `label` its dispatch's.
+    List { name: &'static str, label: &'static str, pipeline: &'a wgpu::ComputePipeline, workgroups: u32 },
 }
 
 impl GatherPass<'_> {
@@ -439,10 +439,14 @@ impl ImageEstimate {
     fn passes_of_gather(&self) -> Vec<GatherPass<'_>> {
         let mut passes = vec![GatherPass::Main { lists: self.edges_pipeline.is_some() }];
         if let GatherPasses::Split { list_workgroups } = self.passes {
-            let lists = [("gather_edges", &self.edges_pipeline), ("gather_first_bounce", &self.first_bounce_pipeline)];
-            passes.extend(lists.into_iter().filter_map(|(name, pipeline)| {
+            let lists = [
+                ("gather_edges", "firstshot.image_estimate.gather_edges", &self.edges_pipeline),
+                ("gather_first_bounce", "firstshot.image_estimate.gather_first_bounce", &self.first_bounce_pipeline),
+            ];
+            passes.extend(lists.into_iter().filter_map(|(name, label, pipeline)| {
                 pipeline.as_ref().map(|pipeline| GatherPass::List {
                     name,
+                    label,
                     pipeline,
                     workgroups: list_workgroups.max(1),
                 })
@@ -471,9 +475,8 @@ impl ImageEstimate {
                     groups,
                 );
             }
-            GatherPass::List { name, pipeline, workgroups } => {
-                let label = format!("firstshot.image_estimate.{name}");
-                kernel::dispatch(encoder, &label, pipeline, &bind_groups, (workgroups, 1));
+            GatherPass::List { label, pipeline, workgroups, .. } => {
+                kernel::dispatch(encoder, label, pipeline, &bind_groups, (workgroups, 1));
             }
         }
     }
