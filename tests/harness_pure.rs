@@ -10,7 +10,7 @@ mod stats;
 #[allow(dead_code)]
 mod svg;
 
-use stats::{Reach, cost_model, equal_error_speedups, parse_image_size, summary, time_to_reach};
+use stats::{Reach, cost_model, equal_error_speedups, pair_ratios, parse_image_size, summary, time_to_reach};
 
 /// Float comparisons of closed-form values: only rounding separates them.
 const EPS: f64 = 1e-9;
@@ -170,4 +170,13 @@ fn test10_the_gpu_scripts_parse() {
         let out = std::process::Command::new("bash").arg("-n").arg(root.join(script)).output().expect("bash runs");
         assert!(out.status.success(), "{script}: {}", String::from_utf8_lossy(&out.stderr));
     }
+}
+
+#[test]
+fn test11_pair_ratios_pair_each_run_with_its_own() {
+    // The views study: all cameras' time over one camera's, pair by pair (not median over
+    // median), and a pair missing its second run left out.
+    assert_eq!(pair_ratios(&[10.0, 12.0, 11.0], &[15.0, 15.0, 22.0]), vec![1.5, 1.25, 2.0]);
+    assert_eq!(pair_ratios(&[10.0, 20.0], &[30.0]), vec![3.0]);
+    assert!(pair_ratios(&[], &[1.0]).is_empty());
 }

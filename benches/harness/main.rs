@@ -1,9 +1,9 @@
 //! The benchmark harness of firstshot (issue #5): throughput per adapter, the convergence
-//! study of the paper's figure 6, the scaling study, and firstshot against Mitsuba 3 (peers).
-//! Prints tables, writes JSON and SVG.
+//! study of the paper's figure 6, the scaling study, firstshot against Mitsuba 3 (peers), and
+//! what a scene's extra cameras cost (views). Prints tables, writes JSON and SVG.
 //!
 //! ```sh
-//! cargo bench --bench harness -- [throughput|convergence|scaling|all|peers] [options]
+//! cargo bench --bench harness -- [throughput|convergence|scaling|all|peers|views] [options]
 //! cargo bench --bench harness -- --help
 //! ```
 //!
@@ -18,6 +18,7 @@ mod session;
 mod stats;
 mod svg;
 mod throughput;
+mod views;
 
 use clap::{Parser, ValueEnum};
 use firstshot::gpu::profile::TIMESTAMP_FEATURES;
@@ -41,10 +42,14 @@ enum Mode {
     /// Time to reach 10, 5 and 2 % image error, firstshot against Mitsuba 3 on the same
     /// machine (whole processes; needs tools/mitsuba/setup.sh, else skips visibly).
     Peers,
+    /// One camera against all of a scene's cameras (`--all-cameras`) at the same steps, in
+    /// alternated pairs of whole processes: the ratio of their times and what a view adds to
+    /// a step.
+    Views,
 }
 
 #[derive(Parser, Debug)]
-#[command(name = "harness", about = "firstshot benchmarks: throughput, convergence, scaling, peers")]
+#[command(name = "harness", about = "firstshot benchmarks: throughput, convergence, scaling, peers, views")]
 struct Args {
     /// What to measure.
     #[arg(value_enum, default_value_t = Mode::Throughput)]
@@ -134,6 +139,12 @@ struct Args {
     /// refs/<scene>.full.exr (default 4096; --quick 256). Kept in --out for the next run.
     #[arg(long, value_name = "N")]
     peer_reference_spp: Option<u32>,
+    /// Image steps of each process of the views study (default 100; --quick 8).
+    #[arg(long, value_name = "N")]
+    view_steps: Option<u32>,
+    /// Image size WxH of every camera in the views study (default 256x256; --quick 128x128).
+    #[arg(long, value_name = "WxH")]
+    view_size: Option<String>,
     /// Open devices without timestamp queries (stage times are then wall times only).
     #[arg(long)]
     no_timestamps: bool,
@@ -166,6 +177,8 @@ pub struct Config {
     pub peer_steps: Vec<u32>,
     pub peer_spp: Vec<u32>,
     pub peer_reference_spp: u32,
+    pub view_steps: u32,
+    pub view_size: (u32, u32),
 }
 
 impl Config {
@@ -420,6 +433,10 @@ fn main() -> ExitCode {
     let quick = args.quick;
     let default_scenes: Vec<String> = if args.mode == Mode::Peers {
         ["cornell_box", "cornell_point", "sierpinski"].map(String::from).to_vec()
+    } else if args.mode == Mode::Views {
+        ["sierpinski_4cameras", "cornell_box_4cameras"]
+            .map(|s| format!("{}/benches/scenes/{s}.toml", env!("CARGO_MANIFEST_DIR")))
+            .to_vec()
     } else {
         vec!["sierpinski".to_string(), "cornell_box".to_string()]
     };
@@ -433,6 +450,17 @@ fn main() -> ExitCode {
         },
         None if quick => vec![(256, 256)],
         None => vec![(512, 512), (2048, 2048)],
+    };
+    let view_size = match &args.view_size {
+        Some(text) => match stats::parse_image_size(text) {
+            Ok(size) => size,
+            Err(e) => {
+                eprintln!("error: --view-size: {e}");
+                return ExitCode::from(2);
+            }
+        },
+        None if quick => (128, 128),
+        None => (256, 256),
     };
     let config = Config {
         quick,
@@ -469,6 +497,8 @@ fn main() -> ExitCode {
             (0..11).map(|k| 1 << k).collect()
         }),
         peer_reference_spp: args.peer_reference_spp.unwrap_or(if quick { 256 } else { 4096 }).max(2),
+        view_steps: args.view_steps.unwrap_or(if quick { 8 } else { 100 }).max(1),
+        view_size,
     };
     if let Err(e) = std::fs::create_dir_all(&config.out) {
         eprintln!("error: creating {}: {e}", config.out.display());
@@ -498,6 +528,7 @@ fn main() -> ExitCode {
         Mode::Convergence => &[Mode::Convergence],
         Mode::Scaling => &[Mode::Scaling],
         Mode::Peers => &[Mode::Peers],
+        Mode::Views => &[Mode::Views],
     };
     let mut failed = false;
     for mode in modes {
@@ -506,6 +537,7 @@ fn main() -> ExitCode {
             Mode::Convergence => pick("first").and_then(|s| convergence::run(&config, &machine, &s)),
             Mode::Scaling => pick("first").and_then(|s| scaling::run(&config, &machine, &s)),
             Mode::Peers => pick("first").and_then(|s| peers::run(&config, &machine, &s)),
+            Mode::Views => pick("first").and_then(|s| views::run(&config, &machine, &s)),
             Mode::All => unreachable!(),
         };
         if let Err(e) = result {

@@ -29,6 +29,12 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
     }
 }
 
+/// Each pair's ratio `b[i] / a[i]` (the views study: all cameras' time over one camera's, the
+/// two runs of a pair side by side); pairs beyond the shorter list are left out.
+pub fn pair_ratios(a: &[f64], b: &[f64]) -> Vec<f64> {
+    a.iter().zip(b).map(|(a, b)| b / a).collect()
+}
+
 /// Summary of `values` (NaNs left out); all NaN for no values.
 pub fn summary(values: &[f64]) -> Summary {
     let mut v: Vec<f64> = values.iter().copied().filter(|x| !x.is_nan()).collect();
