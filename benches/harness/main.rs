@@ -56,13 +56,14 @@ struct Args {
     mode: Mode,
     /// Scenes: names in scenes/ (sierpinski, cornell_box) or paths to TOML files.
     /// Default: sierpinski,cornell_box (scaling always uses sierpinski; peers:
-    /// cornell_box,cornell_point,sierpinski).
+    /// cornell_box,cornell_point,sierpinski; views: benches/scenes/sierpinski_4cameras.toml
+    /// and benches/scenes/cornell_box_4cameras.toml).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     scenes: Option<Vec<String>>,
     /// Adapters: all | first | cpu | gpu | a comma list of indices (as --list-adapters
     /// orders them) or substrings of "name backend type" (e.g. vulkan,gl); all, first, cpu
     /// and gpu leave out adapters firstshot cannot run on (--list-adapters marks them).
-    /// Default: all for throughput, first for convergence and scaling.
+    /// Default: all for throughput, first for convergence, scaling, peers and views.
     #[arg(long, value_name = "SPEC")]
     adapters: Option<String>,
     /// Directory for JSON and SVG.
