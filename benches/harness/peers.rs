@@ -143,6 +143,12 @@ pub fn timed(cmd: &mut Command) -> Result<f64, String> {
     Ok(seconds)
 }
 
+/// The `--stats` JSON a `firstshot` process wrote to `path`; an error names the file.
+pub fn read_stats(path: &Path) -> Result<serde_json::Value, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
 /// The adapter spec to give `firstshot --adapter` for this slot: a CPU adapter by its
 /// backend (lavapipe and llvmpipe share a name), a GPU by its name.
 pub fn adapter_arg(slot: &Slot) -> String {

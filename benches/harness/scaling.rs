@@ -290,7 +290,7 @@ fn process_row(
     patch_size: Option<f64>,
     size: (u32, u32),
 ) -> Result<ProcessRow, String> {
-    use crate::peers::{adapter_arg, firstshot_bin, timed};
+    use crate::peers::{adapter_arg, firstshot_bin, read_stats, timed};
     let dir = config.out.join("scaling_runs");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let tag = match patch_size {
@@ -309,8 +309,7 @@ fn process_row(
             cmd.args(["--patch-size", &p.to_string()]);
         }
         walls.push(timed(&mut cmd)?);
-        let text = std::fs::read_to_string(&stats_path).map_err(|e| format!("{}: {e}", stats_path.display()))?;
-        stats = serde_json::from_str(&text).map_err(|e| format!("{}: {e}", stats_path.display()))?;
+        stats = read_stats(&stats_path)?;
         steps.push(stats["iteration_ms_median"].as_f64().ok_or("no iteration_ms_median in the stats")?);
         if let Some(p) = stats["memory"]["peak_rss_bytes"].as_u64() {
             peak = Some(peak.map_or(p, |q| q.max(p)));

@@ -10,7 +10,7 @@
 //! 1 + (n - 1) I / (B + I) for n views, image stages I and shared stages B a step
 //! (docs/PERFORMANCE.md, "Several cameras").
 
-use crate::peers::{adapter_arg, firstshot_bin, timed};
+use crate::peers::{adapter_arg, firstshot_bin, read_stats, timed};
 use crate::stats::{Summary, pair_ratios, summary};
 use crate::{Config, Machine, Slot, load_scene, print_table, spread, write_json};
 use serde::Serialize;
@@ -81,8 +81,7 @@ fn run_one(
         cmd.args(["--hemicube-resolution", "128", "--bundle-resolution", "128"]);
     }
     let seconds = timed(&mut cmd)?;
-    let text = std::fs::read_to_string(&stats).map_err(|e| format!("{}: {e}", stats.display()))?;
-    let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| format!("{}: {e}", stats.display()))?;
+    let json = read_stats(&stats)?;
     let step_ms =
         json["iteration_ms_median"].as_f64().ok_or_else(|| format!("{}: no iteration_ms_median", stats.display()))?;
     Ok(ViewRun { all_cameras, seconds, step_ms })
