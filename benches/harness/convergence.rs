@@ -306,7 +306,7 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
     let mut results = Vec::new();
     let mut failures = Vec::new();
     for path in &config.scenes {
-        let loaded = load_scene(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let loaded = load_scene(path)?;
         for slot in slots {
             eprintln!("{} on {}", loaded.name, slot.label());
             match guarded(|| measure(config, slot, &loaded)) {

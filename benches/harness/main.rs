@@ -226,9 +226,12 @@ pub struct LoadedScene {
     pub patches: Patches,
 }
 
+/// A scene file loaded and tessellated at its own patch size; every error names the file.
 pub fn load_scene(path: &Path) -> Result<LoadedScene, String> {
+    // The loader's errors name the file already; tessellation's do not.
     let scene = firstshot::scene::load(path).map_err(|e| e.to_string())?;
-    let patches = firstshot::scene::tessellate(&scene, scene.settings.patch_size).map_err(|e| e.to_string())?;
+    let patches = firstshot::scene::tessellate(&scene, scene.settings.patch_size)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
     let name = path.file_stem().unwrap_or_default().to_string_lossy().into_owned();
     Ok(LoadedScene { name, scene, patches })
 }

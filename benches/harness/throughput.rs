@@ -229,7 +229,7 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
     println!("\n== throughput");
     let mut cases = Vec::new();
     for path in &config.scenes {
-        let loaded = load_scene(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let loaded = load_scene(path)?;
         for slot in slots {
             eprintln!("{} on {}", loaded.name, slot.label());
             let result = guarded(|| measure(config, slot, &loaded));

@@ -94,7 +94,7 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
     let mut results = Vec::new();
     let mut table = Vec::new();
     for path in &config.scenes {
-        let loaded = load_scene(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let loaded = load_scene(path)?;
         // `[camera]` and its `[[cameras]]`, as `--all-cameras` renders them.
         let cameras = loaded.scene.cameras.len().max(1);
         if cameras < 2 {
