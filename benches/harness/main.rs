@@ -120,8 +120,8 @@ struct Args {
     patch_sizes: Option<Vec<f64>>,
     /// Image sizes WxH of the scaling study's whole-process runs of the Cornell box (two
     /// image steps; default 512x512,2048x2048; --quick 256x256). 7680x4320 is 8K.
-    #[arg(long, value_delimiter = ',', value_name = "LIST")]
-    images: Option<Vec<String>>,
+    #[arg(long, value_delimiter = ',', value_name = "LIST", value_parser = stats::parse_image_size)]
+    images: Option<Vec<(u32, u32)>>,
     /// Steps per timed configuration of the scaling study (default 20; --quick 4).
     #[arg(long, value_name = "N")]
     scaling_steps: Option<u32>,
@@ -144,8 +144,8 @@ struct Args {
     #[arg(long, value_name = "N")]
     view_steps: Option<u32>,
     /// Image size WxH of every camera in the views study (default 256x256; --quick 128x128).
-    #[arg(long, value_name = "WxH")]
-    view_size: Option<String>,
+    #[arg(long, value_name = "WxH", value_parser = stats::parse_image_size)]
+    view_size: Option<(u32, u32)>,
     /// Open devices without timestamp queries (stage times are then wall times only).
     #[arg(long)]
     no_timestamps: bool,
@@ -444,25 +444,13 @@ fn main() -> ExitCode {
     } else {
         vec!["sierpinski".to_string(), "cornell_box".to_string()]
     };
-    let images = match &args.images {
-        Some(list) => match list.iter().map(|s| stats::parse_image_size(s)).collect::<Result<Vec<_>, _>>() {
-            Ok(sizes) => sizes,
-            Err(e) => {
-                eprintln!("error: --images: {e}");
-                return ExitCode::from(2);
-            }
-        },
+    let images = match args.images {
+        Some(sizes) => sizes,
         None if quick => vec![(256, 256)],
         None => vec![(512, 512), (2048, 2048)],
     };
-    let view_size = match &args.view_size {
-        Some(text) => match stats::parse_image_size(text) {
-            Ok(size) => size,
-            Err(e) => {
-                eprintln!("error: --view-size: {e}");
-                return ExitCode::from(2);
-            }
-        },
+    let view_size = match args.view_size {
+        Some(size) => size,
         None if quick => (128, 128),
         None => (256, 256),
     };

@@ -123,10 +123,9 @@ pub fn run(config: &Config, machine: &Machine, slots: &[Slot]) -> Result<(), Str
                     runs.push(r);
                 }
             }
-            let pick = |all: bool, f: fn(&ViewRun) -> f64| -> Vec<f64> {
-                runs.iter().filter(|r| r.all_cameras == all).map(f).collect()
-            };
-            let (one_s, all_s) = (pick(false, |r| r.seconds), pick(true, |r| r.seconds));
+            let seconds =
+                |all: bool| -> Vec<f64> { runs.iter().filter(|r| r.all_cameras == all).map(|r| r.seconds).collect() };
+            let (one_s, all_s) = (seconds(false), seconds(true));
             let ratio = summary(&pair_ratios(&one_s, &all_s));
             let extra_view_steps = ((cameras - 1) as u64 * config.view_steps as u64) as f64;
             let per_view: Vec<f64> = one_s.iter().zip(&all_s).map(|(o, a)| 1e3 * (a - o) / extra_view_steps).collect();
