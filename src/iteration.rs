@@ -5,7 +5,7 @@
 use crate::gpu::profile::Stage;
 use crate::gpu::scene_buffers::{IMAGE_SENDERS, OUTGOING, Paged, SceneBuffers, TRANSFER_SUMS};
 use crate::gpu::{Context, buffers};
-use crate::layout::{GpuBundle, LINE_BUCKET};
+use crate::layout::{BURN_IN_STEP, GpuBundle, IMAGE_STEP, IMAGE_STEP_OWN_DIRECTIONS, LINE_BUCKET};
 use crate::rng::StepRng;
 use crate::scene::Patches;
 use crate::stages::bundle_finalize::BundleFinalize;
@@ -52,17 +52,35 @@ pub fn pixel_stride(per_step: u32) -> u32 {
     if per_step >= 4 { 2 } else { 1 }
 }
 
+/// Bundles of burn-in an image needs before its directions can be its own stratified set:
+/// the images's steps then keep every Lbar_j as the burn-in left it (bundle_finalize), which
+/// takes about this many bundles to settle (its weight, MEAN_RADIANCE_WEIGHT there, is 1/8).
+/// With less (`--burn-in 0`), the image takes the run's blocks of directions and Lbar_j runs
+/// on, as it did before images had sets of their own.
+pub const SETTLED_MEAN_BUNDLES: u32 = 8;
+
+/// The image a step belongs to: it started at step `start` and averages `steps` steps where
+/// that is known (a run's `--iterations`, a walkthrough frame's steps) and the burn-in
+/// settled Lbar_j (`SETTLED_MEAN_BUNDLES`), `None` where not (the viewer, which refines until
+/// the camera moves).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ImagePlan {
+    pub start: u64,
+    pub steps: Option<u64>,
+}
+
 /// The bundle of step `step` (the one place a `GpuBundle` is made): direction uniform on
-/// the sphere (stratified over blocks of steps, `rng::stratified_direction`), grid rotated
-/// uniformly about it and shifted by a uniform sub-pixel offset;
-/// the grid covers the bounding sphere. `image_step`: the step is past the burn-in, so its J
+/// the sphere, grid rotated uniformly about it and shifted by a uniform sub-pixel offset;
+/// the grid covers the bounding sphere. The directions are stratified: over the image's own
+/// steps where its length is known (`rng::image_direction`), else over blocks of the run's
+/// steps (`rng::stratified_direction`). `image`: the step is past the burn-in, so its J
 /// joins the state's running sum. Returns the step's generator, advanced past the bundle's
 /// numbers, for the rest of the step's random choices.
 pub fn bundle_of_step(
     seed: u64,
     step: u64,
     bundle: StepBundle,
-    image_step: bool,
+    image: Option<ImagePlan>,
     scene: &BundleScene,
     resolution: u32,
     capacity: u32,
@@ -71,7 +89,15 @@ pub fn bundle_of_step(
     // k per_step + q (with one bundle a step, element k).
     let index = step * bundle.per_step as u64 + bundle.index as u64;
     let mut rng = StepRng::new(seed, index);
-    let d = crate::rng::stratified_direction(seed, index);
+    let (d, image_step) = match image {
+        Some(ImagePlan { start, steps: Some(steps) }) if step >= start => {
+            let set = crate::rng::ImageDirections { start, steps };
+            let d = crate::rng::image_direction(seed, set, bundle.index, bundle.per_step, step - start);
+            (d, IMAGE_STEP_OWN_DIRECTIONS)
+        }
+        Some(_) => (crate::rng::stratified_direction(seed, index), IMAGE_STEP),
+        None => (crate::rng::stratified_direction(seed, index), BURN_IN_STEP),
+    };
     let angle = 2.0 * std::f64::consts::PI * rng.uniform();
     let t1 = d.any_orthonormal_vector();
     let t2 = d.cross(t1);
@@ -95,11 +121,14 @@ pub fn bundle_of_step(
         capacity,
         // J is zero before the first step has written it.
         use_state: (step > 0) as u32,
-        image_step: image_step as u32,
+        image_step,
         pixel_class: bundle.index,
         pixel_stride: pixel_stride(bundle.per_step),
-        // The step's, not the bundle's: its four bundles must split each block among them.
-        pixel_shuffle: (crate::rng::splitmix64(seed ^ step.wrapping_mul(0x9e37_79b9_7f4a_7c15)) >> 32) as u32,
+        // The image's, not the bundle's: a step's four bundles must split each block among
+        // them, and each pixel gathers through the same bundle of every step of the image, so
+        // that its directions are one bundle's stratified set (`rng::image_direction`).
+        pixel_shuffle: image
+            .map_or(0, |p| (crate::rng::splitmix64(seed ^ p.start.wrapping_mul(0x9e37_79b9_7f4a_7c15)) >> 32) as u32),
     };
     (bundle, rng)
 }
@@ -572,14 +601,14 @@ impl Iteration {
         seed: u64,
         step: u64,
         per_step: u32,
-        image_step: bool,
+        image: Option<ImagePlan>,
         scene: &BundleScene,
     ) -> StepRng {
         let mut first = None;
         let mut bundles = Vec::with_capacity(per_step as usize);
         for index in 0..per_step {
             let which = StepBundle { index, per_step };
-            let (bundle, rng) = bundle_of_step(seed, step, which, image_step, scene, self.resolution, self.capacity);
+            let (bundle, rng) = bundle_of_step(seed, step, which, image, scene, self.resolution, self.capacity);
             bundles.push(bundle);
             first.get_or_insert(rng);
         }

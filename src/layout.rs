@@ -38,6 +38,12 @@ pub const LATTICE_TWINS: u32 = 1 << 18;
 pub const FIXED_POINT_SCALE: f32 = 2147483648.0;
 /// Bundle fragments carry their patch's facing (front toward +d) in the top bit of the id.
 pub const FRAGMENT_FRONT_BIT: u32 = 1 << 31;
+/// `GpuBundle::image_step`: a step of the burn-in, a step of an image whose directions are
+/// the run's blocks (`rng::stratified_direction`), or one of an image whose directions are
+/// its own stratified set (`rng::image_direction`), which keeps Lbar_j as it was.
+pub const BURN_IN_STEP: u32 = 0;
+pub const IMAGE_STEP: u32 = 1;
+pub const IMAGE_STEP_OWN_DIRECTIONS: u32 = 2;
 /// Fragment slots each bundle line owns (`wgsl/bundle_visibility.wgsl`): a line's first
 /// surfaces go there in one pass; the rest spill into a list chained per line. 8 slots of
 /// 8 bytes are one 64-byte cache line.
@@ -341,7 +347,8 @@ pub struct GpuBundle {
     pub capacity: u32,
     /// 1 once the iteration state holds J (after step 1).
     pub use_state: u32,
-    /// 1 on an image step (past the burn-in): its J joins the running sum of the state.
+    /// `BURN_IN_STEP`, or past the burn-in, `IMAGE_STEP` or `IMAGE_STEP_OWN_DIRECTIONS`:
+    /// its J joins the running sum of the state.
     pub image_step: u32,
     /// The image's gather through this bundle takes one pixel of each pixel_stride x
     /// pixel_stride block (`pixel_shuffle`): one class of the interleaved bundles of a step
@@ -349,10 +356,11 @@ pub struct GpuBundle {
     pub pixel_class: u32,
     /// 1 (every pixel gathers through the one bundle of a step) or 2 (four bundles a step).
     pub pixel_stride: u32,
-    /// The step's shuffle of the classes within each 2 x 2 block, the same for its four
-    /// bundles: block b's pixel at offset (pixel_class + hash(b, pixel_shuffle)) mod 4
-    /// gathers through bundle pixel_class, so that every pixel gathers once a step and no
-    /// fixed pattern of classes shows in the image.
+    /// The image's shuffle of the classes within each 2 x 2 block, the same for a step's four
+    /// bundles and for every step of the image: block b's pixel at offset (pixel_class +
+    /// hash(b, pixel_shuffle)) mod 4 gathers through bundle pixel_class, so that every pixel
+    /// gathers once a step, always through the same bundle (whose directions are a
+    /// stratified set, `rng::image_direction`), and no fixed pattern of classes shows.
     pub pixel_shuffle: u32,
 }
 
@@ -427,6 +435,9 @@ pub fn wgsl_constants() -> String {
          const LATTICE_CORNER_SHIFT: u32 = {LATTICE_CORNER_SHIFT}u;\n\
          const LATTICE_TWINS: u32 = {LATTICE_TWINS}u;\n\
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
+         const BURN_IN_STEP: u32 = {BURN_IN_STEP}u;\n\
+         const IMAGE_STEP: u32 = {IMAGE_STEP}u;\n\
+         const IMAGE_STEP_OWN_DIRECTIONS: u32 = {IMAGE_STEP_OWN_DIRECTIONS}u;\n\
          const LINE_BUCKET: u32 = {LINE_BUCKET}u;\n\
          const TALLY_SPILLED: u32 = {TALLY_SPILLED}u;\n\
          const TALLY_LONG: u32 = {TALLY_LONG}u;\n\

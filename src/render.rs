@@ -680,7 +680,8 @@ pub fn render_path(
         total_ms: 0.0,
     };
     for f in first..frames.len() as u32 {
-        renderer.restart_image(Camera { width: options.width, height: options.height, ..frames[f as usize] }, step);
+        let camera = Camera { width: options.width, height: options.height, ..frames[f as usize] };
+        renderer.restart_image(camera, step, Some(steps_per_frame));
         let end = step + steps_per_frame;
         let stats = renderer.advance(step, end, hooks)?;
         step_ms.push(stats.step_ms_median);
@@ -755,6 +756,10 @@ pub struct Renderer<'a> {
     /// The step whose estimate is the image's first: the burn-in, or a frame's first step
     /// (`render_path`), which counts its direct-light passes from there.
     image_start: u32,
+    /// The steps the image averages where known (`options.iterations`, a frame's steps;
+    /// `None` after the viewer's camera moves): its bundle directions are then stratified
+    /// over them (`iteration::ImagePlan`).
+    image_steps: Option<u32>,
     /// Which image steps estimate the direct light.
     direct_schedule: DirectSchedule,
     /// Whether this pass estimates the direct light (`image_stages`).
@@ -888,6 +893,7 @@ impl<'a> Renderer<'a> {
             coarse,
             burn_in,
             image_start: burn_in,
+            image_steps: Some(options.iterations),
             direct_schedule: DirectSchedule::of(scene, patches, given),
             direct_due: true,
             windows_due: true,
@@ -949,12 +955,17 @@ impl<'a> Renderer<'a> {
         let queue = &self.ctx.queue;
         let image_step = k >= self.image_start;
         let per_step = self.per_step;
+        let settled = self.burn_in.saturating_mul(per_step) >= crate::iteration::SETTLED_MEAN_BUNDLES;
+        let image = image_step.then_some(crate::iteration::ImagePlan {
+            start: self.image_start as u64,
+            steps: self.image_steps.filter(|_| settled).map(u64::from),
+        });
         let mut rng = self.iteration_at(k).write_bundles(
             queue,
             self.options.seed,
             k as u64,
             per_step,
-            image_step,
+            image,
             &self.bundle_scene(),
         );
         if image_step {
@@ -1031,13 +1042,23 @@ impl<'a> Renderer<'a> {
     /// Points the first view at `camera` (of the view's size) and starts its image average
     /// afresh with step `step` (or, within the burn-in, with the burn-in's end): a frame of
     /// a walkthrough, or a camera move in the viewer. The iteration state carries on, since
-    /// it does not depend on the view; so the new image sharpens within a few steps.
-    pub fn restart_image(&mut self, camera: Camera, step: u32) {
+    /// it does not depend on the view; so the new image sharpens within a few steps. `steps`:
+    /// how many steps the new image will average, where known (its directions are then
+    /// stratified over them, `iteration::ImagePlan`).
+    pub fn restart_image(&mut self, camera: Camera, step: u32, steps: Option<u32>) {
         let view = &mut self.views[0];
         view.camera = Camera { width: view.camera.width, height: view.camera.height, ..camera };
         self.forget_rasters();
         self.clear_images();
         self.image_start = step.max(self.burn_in);
+        self.image_steps = steps;
+    }
+
+    /// How many steps the image will average, where known (its directions are then
+    /// stratified over them, `iteration::ImagePlan`); only before its first step, since its
+    /// steps so far took their directions from the plan they had.
+    pub fn set_image_steps(&mut self, steps: Option<u32>) {
+        self.image_steps = steps;
     }
 
     /// The step whose estimate is the first of the image (`restart_image`).

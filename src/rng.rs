@@ -46,18 +46,94 @@ const BLOCK_STREAM: u64 = u64::MAX / 4;
 /// uniform), mapped to the sphere by an area-preserving map, and visited in the block's
 /// random order, so that consecutive steps' directions are as good as independent (the
 /// iteration's two-bounce estimates pair them) while a block covers the sphere evenly.
+/// The burn-in's steps take these; an image's steps take `image_direction` where the image
+/// knows how many steps it averages.
 pub fn stratified_direction(seed: u64, step: u64) -> glam::DVec3 {
     let block = step / DIRECTION_BLOCK;
     let mut rng = StepRng::new(seed, BLOCK_STREAM - block);
     let shift = [rng.uniform(), rng.uniform()];
-    let v = shuffled(&mut rng, DIRECTION_BLOCK, step % DIRECTION_BLOCK) as f64;
+    let v = shuffled(&mut rng, DIRECTION_BLOCK, step % DIRECTION_BLOCK);
+    r2_direction(shift, v)
+}
+
+/// Point `v` of the R2 sequence shifted by `shift` (each point then uniform on the unit
+/// square), mapped to the sphere by the area-preserving map (z, phi).
+fn r2_direction(shift: [f64; 2], v: u64) -> glam::DVec3 {
+    // The sequence's increments, 1 / g and 1 / g^2 for the plastic number g; their products
+    // with v are reduced mod 1 exactly enough (v < 2^34: 18 bits left of a 52-bit mantissa).
     const A1: f64 = 0.754_877_666_246_692_7;
     const A2: f64 = 0.569_840_290_998_053_3;
-    let (u1, u2) = ((shift[0] + v * A1).fract(), (shift[1] + v * A2).fract());
+    let v = v as f64;
+    let (u1, u2) = ((shift[0] + (v * A1).fract()).fract(), (shift[1] + (v * A2).fract()).fract());
     let z = 1.0 - 2.0 * u1;
     let phi = 2.0 * std::f64::consts::PI * u2;
     let r = (1.0 - z * z).max(0.0).sqrt();
     glam::DVec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// The steps of one image whose bundle directions form their own stratified set
+/// (`image_direction`): the image starts at step `start` and averages `steps` steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ImageDirections {
+    pub start: u64,
+    pub steps: u64,
+}
+
+/// Generator streams of the images' direction sets, apart from the steps' and the blocks'.
+const IMAGE_STREAM: u64 = u64::MAX / 8 * 3;
+
+/// The direction of bundle `bundle` (of `per_step`) of an image's step `image_step` (counted
+/// from the image's first step). The image's bundles take the first `per_step x
+/// image.steps` points of the R2 sequence shifted by one random offset for the image (as
+/// `stratified_direction`'s blocks are): bundle q takes the run of `image.steps` points
+/// from q x image.steps on, in a random order of its own. So whatever the image's length,
+/// its directions together cover the sphere as evenly as the R2 points do, and so do each
+/// bundle's alone (a run of a Kronecker sequence is as even as its start); a pixel gathers
+/// through the same bundle at every step of an image (`iteration::bundle_of_step`'s
+/// `pixel_shuffle`), and a block of 2 x 2 pixels through all of them. The run's blocks of
+/// `DIRECTION_BLOCK` gave an image of fewer steps (or one starting inside a block, after the
+/// burn-in) a random part of a block, spread no better than independent directions. The
+/// orders are random and each bundle's its own, so the directions that follow one another
+/// in the iteration (a step's bundles, then the next step's) are as good as independent, as
+/// its two-bounce estimates need. A step past the image's length (not asked for) takes a
+/// set of the same size of its own.
+pub fn image_direction(seed: u64, image: ImageDirections, bundle: u32, per_step: u32, image_step: u64) -> glam::DVec3 {
+    let n = image.steps.max(1);
+    let key = splitmix64(image.start ^ splitmix64(image_step / n));
+    let mut rng = StepRng::new(seed ^ key, IMAGE_STREAM);
+    let shift = [rng.uniform(), rng.uniform()];
+    let order = splitmix64(((rng.0.next_u32() as u64) << 32 | rng.0.next_u32() as u64) ^ bundle as u64);
+    let v = bundle.min(per_step.max(1) - 1) as u64 * n + permuted(image_step % n, n, order);
+    r2_direction(shift, v)
+}
+
+/// Element `index` of a random permutation of 0..len chosen by `key`, in constant expected
+/// time and memory whatever len: a bijection of the numbers of as many bits as len - 1
+/// needs, applied until it lands below len (cycle walking, as in Kensler's correlated
+/// multi-jittered sampling, 2013). Each round is invertible on those bits: xor with a
+/// constant, multiplication by an odd one, xor with the number shifted right.
+fn permuted(index: u64, len: u64, key: u64) -> u64 {
+    if len <= 1 {
+        return 0;
+    }
+    let bits = 64 - (len - 1).leading_zeros();
+    let mask = if bits == 64 { u64::MAX } else { (1u64 << bits) - 1 };
+    let rounds: [(u64, u64); 4] = std::array::from_fn(|r| {
+        let k = splitmix64(key ^ (r as u64) << 56);
+        (k & mask, (splitmix64(k) | 1) & mask)
+    });
+    let shift = bits / 2 + 1;
+    let mut x = index;
+    loop {
+        for (xor, odd) in rounds {
+            x ^= xor;
+            x = x.wrapping_mul(odd) & mask;
+            x ^= x >> shift;
+        }
+        if x < len {
+            return x;
+        }
+    }
 }
 
 /// Element `index` of a random permutation of 0..len drawn from `rng` (Fisher-Yates, drawn
@@ -143,6 +219,96 @@ mod tests {
     }
 
     #[test]
+    fn permuted_is_a_permutation_for_every_length() {
+        for len in 1..=100u64 {
+            for key in [0, 1, 0xdead_beef, u64::MAX] {
+                let mut seen = vec![false; len as usize];
+                for i in 0..len {
+                    let p = permuted(i, len, key);
+                    assert!(p < len && !seen[p as usize], "len {len}, key {key}: {i} -> {p} twice or out of range");
+                    seen[p as usize] = true;
+                }
+            }
+        }
+        // A length far past any list a test could hold: still in range and distinct.
+        let len = 3_000_000_019;
+        let mut some: Vec<u64> = (0..2000).map(|i| permuted(i * 1_000_003, len, 7)).collect();
+        assert!(some.iter().all(|&p| p < len));
+        some.sort_unstable();
+        some.dedup();
+        assert_eq!(some.len(), 2000);
+        // Other keys, other orders.
+        let order = |key: u64| (0..64).map(|i| permuted(i, 64, key)).collect::<Vec<_>>();
+        assert_ne!(order(1), order(2));
+    }
+
+    /// Squared deviation of the octant counts of `d` from an even split, summed over the
+    /// octants: about n 7/8 for independent directions.
+    fn octant_deviation(d: &[glam::DVec3]) -> f64 {
+        let mut octants = [0.0f64; 8];
+        for v in d {
+            octants[(v.x > 0.0) as usize + 2 * (v.y > 0.0) as usize + 4 * (v.z > 0.0) as usize] += 1.0;
+        }
+        let even = d.len() as f64 / 8.0;
+        octants.iter().map(|c| (c - even).powi(2)).sum()
+    }
+
+    #[test]
+    fn an_images_directions_cover_the_sphere_evenly_for_any_length() {
+        let image = |start: u64, steps: u64| ImageDirections { start, steps };
+        // Over many images, every (bundle, step) is uniform: mean 0 and E[z^2] = 1/3.
+        let (mut mean, mut z2, mut count) = (glam::DVec3::ZERO, 0.0, 0.0);
+        for start in 0..400 {
+            for i in 0..29 {
+                for q in 0..4 {
+                    let d = image_direction(3, image(start, 29), q, 4, i);
+                    assert!((d.length() - 1.0).abs() < 1e-12);
+                    mean += d;
+                    z2 += d.z * d.z;
+                    count += 1.0;
+                }
+            }
+        }
+        assert!((mean / count).length() < 0.01 && (z2 / count - 1.0 / 3.0).abs() < 0.01, "{mean} {z2}");
+        // Each bundle's steps, and a step's bundles together, split evenly over the octants:
+        // summed over 64 images, the deviation is a small part of independent directions'
+        // (n 7/8 an image); before, an image of fewer steps than a block took a random part
+        // of it and deviated as much as independent directions.
+        for (steps, per_step) in [(13u64, 1u32), (29, 1), (64, 1), (29, 4), (100, 4)] {
+            let (mut own, mut together) = (0.0, 0.0);
+            for start in 0..64 {
+                let d = |q: u32, i: u64| image_direction(11, image(40 + 1000 * start, steps), q, per_step, i);
+                for q in 0..per_step {
+                    own += octant_deviation(&(0..steps).map(|i| d(q, i)).collect::<Vec<_>>());
+                }
+                let all: Vec<_> = (0..steps).flat_map(|i| (0..per_step).map(move |q| d(q, i))).collect();
+                together += octant_deviation(&all);
+            }
+            let independent = |n: u64| 64.0 * n as f64 * 7.0 / 8.0;
+            let own = own / per_step as f64;
+            assert!(own < 0.4 * independent(steps), "{steps} steps: {own} against {}", independent(steps));
+            let n = steps * per_step as u64;
+            assert!(together < 0.4 * independent(n), "{steps} x {per_step}: {together} against {}", independent(n));
+        }
+        // One direction after another in the iteration (a step's bundles, then the next
+        // step's first) is as good as independent: E|d . d'| = 1/2 (standard error about
+        // 0.29 / sqrt(n)), where consecutive points of a stratified set would be apart.
+        let (mut sum, mut n) = (0.0, 0.0);
+        for start in 0..100 {
+            let seq: Vec<_> =
+                (0..50).flat_map(|i| (0..4).map(move |q| image_direction(5, image(start, 50), q, 4, i))).collect();
+            for w in seq.windows(2) {
+                sum += w[0].dot(w[1]).abs();
+                n += 1.0;
+            }
+        }
+        assert!((sum / n - 0.5).abs() < 0.02, "E|d . d'| = {}", sum / n);
+        // The image's start (a walkthrough's frame) and the seed choose other sets.
+        assert_ne!(image_direction(5, image(40, 29), 0, 1, 3), image_direction(5, image(69, 29), 0, 1, 3));
+        assert_ne!(image_direction(5, image(40, 29), 0, 1, 3), image_direction(6, image(40, 29), 0, 1, 3));
+    }
+
+    #[test]
     fn pixel_samples_fill_each_stratum_once_a_block() {
         let cells = PIXEL_STRATA * PIXEL_STRATA;
         let mut sum = [0.0; 2];
@@ -218,5 +384,33 @@ mod tests {
         mean /= n as f64;
         assert!(mean.length() < 0.01, "mean {mean}");
         assert!((z2 / n as f64 - 1.0 / 3.0).abs() < 0.01);
+    }
+}
+#[cfg(test)]
+mod probe {
+    use super::*;
+    #[test]
+    fn probe_consecutive() {
+        for (n, per_step) in [(250u64, 1u32), (50, 1), (29, 1), (250, 4)] {
+            let (mut sum, mut cnt) = (0.0, 0.0);
+            let mut diffs = std::collections::HashMap::new();
+            for start in 0..200u64 {
+                let img = ImageDirections { start, steps: n };
+                let seq: Vec<_> =
+                    (0..n).flat_map(|i| (0..per_step).map(move |q| image_direction(5, img, q, per_step, i))).collect();
+                for w in seq.windows(2) {
+                    sum += w[0].dot(w[1]).abs();
+                    cnt += 1.0;
+                }
+                for i in 0..n - 1 {
+                    let a = permuted(i, n, start * 77 + 1) as i64;
+                    let b = permuted(i + 1, n, start * 77 + 1) as i64;
+                    *diffs.entry(b - a).or_insert(0) += 1;
+                }
+            }
+            let mut top: Vec<_> = diffs.into_iter().collect();
+            top.sort_by_key(|x| -x.1);
+            eprintln!("n {n} x{per_step}: E|d.d'| {:.4}; top diffs {:?}", sum / cnt, &top[..5]);
+        }
     }
 }

@@ -60,7 +60,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // keeps them unbiased; a spiked Lbar_j gave the image's first steps pixels of +-50 where
     // the radiance is 0.2 (a Cornell box sliver at bundle 64).
     let weight = MEAN_RADIANCE_WEIGHT * min(1.0, 1.0 / factor);
-    let mean_radiance = mix(old_mean_radiance, 2.0 * diffuse, weight);
+    var mean_radiance = mix(old_mean_radiance, 2.0 * diffuse, weight);
+    // An image whose directions are its own stratified set (rng::image_direction) keeps
+    // Lbar_j as the burn-in left it: a direction of the set avoids the strata the set's
+    // earlier ones took, so it is not independent of an Lbar_j made from them, and the
+    // control variates here and in the gather would lose their zero mean (+1 % on a sunlit
+    // glossy square, tests/lights.rs test10). The burn-in's directions are a stream of
+    // their own, so its Lbar_j is independent of every image's.
+    if (bundle.image_step == IMAGE_STEP_OWN_DIRECTIONS) {
+        mean_radiance = old_mean_radiance;
+    }
     // Past the burn-in, K joins the running sum whose mean the image's senders reflect.
     var sum = state_at(j).diffuse_sum;
     if (bundle.image_step != 0u) {

@@ -913,10 +913,11 @@ fn gather_radiance(at: Seen, incoming: vec3<f32>, toward: vec3<f32>) -> vec3<f32
 
 // The pixel of block `block` (of pixel_stride x pixel_stride pixels) that gathers through
 // this bundle: the one at offset (pixel_class + h) mod 4 in the block (x first), h a hash of
-// the block and the step's pixel_shuffle. The four bundles of a step take the four offsets
-// of every block; which takes which changes from block to block and step to step, so that
-// the classes' errors, each smooth over the image, show as noise rather than as a fixed
-// 2 x 2 pattern.
+// the block and the image's pixel_shuffle. The four bundles of a step take the four offsets
+// of every block; which takes which changes from block to block, so that the classes'
+// errors, each smooth over the image, show as noise rather than as a fixed 2 x 2 pattern,
+// and not from step to step, so that a pixel's directions are one bundle's stratified set
+// (rng::image_direction).
 fn class_pixel(block: vec2<u32>) -> vec2<u32> {
     let stride = this_bundle.pixel_stride;
     if (stride == 1u) {

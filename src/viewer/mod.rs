@@ -414,7 +414,9 @@ impl Viewer {
         }
         let display = Display::new(ctx, window, surface)?;
         let mut hooks = PhaseHooks { quiet: setup.quiet };
-        let renderer = Renderer::new(ctx, setup.scene, &setup.patches, &setup.options, &mut hooks)?;
+        let mut renderer = Renderer::new(ctx, setup.scene, &setup.patches, &setup.options, &mut hooks)?;
+        // The viewer refines until the camera moves: its images' lengths are not known.
+        renderer.set_image_steps(None);
         if !setup.quiet {
             say(&format!("showing {width}x{height} on a {:?} surface", display.format()));
         }
@@ -450,7 +452,7 @@ impl Viewer {
                 }
                 return Ok((None, moved));
             };
-            let session = self.session.as_ref().expect("a session runs the script");
+            let session = self.session.as_mut().expect("a session runs the script");
             match command {
                 Command::Steps(n) => {
                     if moved {
@@ -458,6 +460,11 @@ impl Viewer {
                         return Ok((None, moved));
                     }
                     let start = session.renderer.image_start();
+                    if session.step <= start {
+                        // An image asked for n steps from its start is a render's of n steps,
+                        // its directions stratified over them.
+                        session.renderer.set_image_steps(Some(n));
+                    }
                     if session.step.saturating_sub(start) < n {
                         return Ok((Some(start.saturating_add(n)), moved));
                     }
@@ -521,7 +528,7 @@ impl Viewer {
         let budget = self.frame_budget;
         let session = self.session.as_mut().expect("checked above");
         if moved {
-            session.renderer.restart_image(self.camera.camera, session.step);
+            session.renderer.restart_image(self.camera.camera, session.step, None);
             session.image = None;
         }
         // Steps this frame: as many as the budget affords at the measured step time.
