@@ -386,31 +386,3 @@ mod tests {
         assert!((z2 / n as f64 - 1.0 / 3.0).abs() < 0.01);
     }
 }
-#[cfg(test)]
-mod probe {
-    use super::*;
-    #[test]
-    fn probe_consecutive() {
-        for (n, per_step) in [(250u64, 1u32), (50, 1), (29, 1), (250, 4)] {
-            let (mut sum, mut cnt) = (0.0, 0.0);
-            let mut diffs = std::collections::HashMap::new();
-            for start in 0..200u64 {
-                let img = ImageDirections { start, steps: n };
-                let seq: Vec<_> =
-                    (0..n).flat_map(|i| (0..per_step).map(move |q| image_direction(5, img, q, per_step, i))).collect();
-                for w in seq.windows(2) {
-                    sum += w[0].dot(w[1]).abs();
-                    cnt += 1.0;
-                }
-                for i in 0..n - 1 {
-                    let a = permuted(i, n, start * 77 + 1) as i64;
-                    let b = permuted(i + 1, n, start * 77 + 1) as i64;
-                    *diffs.entry(b - a).or_insert(0) += 1;
-                }
-            }
-            let mut top: Vec<_> = diffs.into_iter().collect();
-            top.sort_by_key(|x| -x.1);
-            eprintln!("n {n} x{per_step}: E|d.d'| {:.4}; top diffs {:?}", sum / cnt, &top[..5]);
-        }
-    }
-}
