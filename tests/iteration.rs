@@ -567,3 +567,37 @@ fn test10_patches_smaller_than_a_line_keep_their_mean_radiance_bounded() {
     let largest = specks.iter().cloned().fold(0.0f32, f32::max);
     assert!(largest < 2.0 * exact, "a speck's Lbar {largest} against {exact}: {specks:?}");
 }
+
+#[test]
+fn test11_an_image_with_its_own_directions_keeps_the_burn_ins_mean_radiance() {
+    // An image whose directions are its own stratified set (rng::image_direction) must not
+    // move Lbar_j, the control variates' coefficient: a direction of the set depends on the
+    // set's earlier ones, so a Lbar_j made from them would bias the variates (ALGORITHM.md
+    // 2.4). So after a burn-in of 24 steps, the state's Lbar_j after 1 and after 6 image steps
+    // is the burn-in's to the bit, while J has moved on. After a burn-in of 2 steps (fewer
+    // than iteration::SETTLED_MEAN_BUNDLES bundles) the image takes the run's blocks of
+    // directions and Lbar_j runs on.
+    use firstshot::layout::GpuPatchState;
+    let Some(ctx) = gpu() else { return };
+    let (scene, patches) = furnace(0.6, 1.0);
+    let state_after = |burn_in: u32, iterations: u32| {
+        let mut o = options(&scene, iterations, 4);
+        o.burn_in = Some(burn_in);
+        o.bundles_per_step = Some(1);
+        let mut hooks = FinalState::default();
+        firstshot::render::render_with(&ctx, &scene, &patches, &o, None, &mut hooks).unwrap();
+        bytemuck::pod_collect_to_vec::<u8, GpuPatchState>(&hooks.0.unwrap())
+    };
+    // Patches whose Lbar_j (or J) differs between the two states.
+    let moved = |a: &[GpuPatchState], b: &[GpuPatchState], field: fn(&GpuPatchState) -> [f32; 4]| {
+        a.iter().zip(b).filter(|(p, q)| field(p) != field(q)).count()
+    };
+    let (one, six) = (state_after(24, 1), state_after(24, 6));
+    assert!(one.iter().all(|p| p.mean_radiance[0] > 0.5), "the burn-in leaves Lbar_j near L = 2.5");
+    let n = one.len();
+    let lbar_moved = moved(&one, &six, |p| p.mean_radiance);
+    assert_eq!(lbar_moved, 0, "an image with its own directions moved Lbar_j of {lbar_moved} of {n} patches");
+    assert!(moved(&one, &six, |p| p.incoming) > n / 2, "the image's steps move J");
+    let (one, six) = (state_after(2, 1), state_after(2, 6));
+    assert!(moved(&one, &six, |p| p.mean_radiance) > n / 2, "after a short burn-in Lbar_j runs on");
+}
