@@ -645,7 +645,8 @@ fn test10_sunlit_glossy_square_lights_a_receiver_through_the_iteration() {
     // The pixels measured are the centre 4 x 4 of the 16 x 16 image: the camera looks
     // straight up (its up is +y), so they see the square of the receiver's plane within a
     // quarter of the half-width of the view of the centre, where the radiance is averaged
-    // (not over the whole triangle, whose far corners get other shares of the lobe).
+    // (over the whole triangle it is the same to four digits here, but this is what the
+    // pixels see).
     let half = 0.25 * (scene.camera.fov_y / 2.0).to_radians().tan() * (h - scene.camera.position.z);
     let grid = 8;
     let seen = |i: usize| -half + (i as f64 + 0.5) * 2.0 * half / grid as f64;

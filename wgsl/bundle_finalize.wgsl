@@ -64,15 +64,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // An image whose directions are its own stratified set (rng::image_direction) keeps
     // Lbar_j as the burn-in left it: a direction of the set avoids the strata the set's
     // earlier ones took, so it is not independent of an Lbar_j made from them, and the
-    // control variates here and in the gather would lose their zero mean (+1 % on a sunlit
-    // glossy square, tests/lights.rs test10). The burn-in's directions are a stream of
-    // their own, so its Lbar_j is independent of every image's.
+    // control variates here and in the gather would lose their zero mean (16-point sets
+    // with a running Lbar_j put a sunlit glossy receiver 4.8 % high, tests/lights.rs
+    // test10). The burn-in's directions are a stream of their own, so its Lbar_j is
+    // independent of every image's.
     if (bundle.image_step == IMAGE_STEP_OWN_DIRECTIONS) {
         mean_radiance = old_mean_radiance;
     }
     // Past the burn-in, K joins the running sum whose mean the image's senders reflect.
     var sum = state_at(j).diffuse_sum;
-    if (bundle.image_step != 0u) {
+    if (bundle.image_step != BURN_IN_STEP) {
         sum += vec4<f32>(diffuse, 1.0);
     }
     // The last steps' J_j move down the history (the oldest drops out): the image's senders
