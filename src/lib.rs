@@ -14,6 +14,7 @@
 //! `shard` and `merge` split one run into independent chains on many machines and add their
 //! image sums exactly (docs/DISTRIBUTED.md).
 
+pub mod burn_in;
 pub mod checkpoint;
 pub mod direct_light;
 pub mod error;

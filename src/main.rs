@@ -523,7 +523,8 @@ fn read_resume(
             path.display()
         )));
     }
-    let burn_in = firstshot::render::burn_in_steps(scene, options, options.bundles_per_step_for(scene, patches));
+    let (burn_in, _) =
+        firstshot::render::burn_in_steps(scene, patches, options, options.bundles_per_step_for(scene, patches));
     let pixels: Vec<u64> =
         options.views(scene).iter().map(|v| v.camera.width as u64 * v.camera.height as u64).collect();
     let schedule = firstshot::render::DirectSchedule::of(scene, patches, options);

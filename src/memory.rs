@@ -151,7 +151,7 @@ pub fn predict(
             let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
             let capacity = |resolution| initial_fragment_capacity(options, limits, patches, radius, resolution);
             // The coarse burn-in's lines and fragments live beside the full grid's while it runs.
-            let burn_in = crate::render::burn_in_steps(scene, options, per_step);
+            let burn_in = crate::render::longest_burn_in_steps(scene, options, per_step);
             let (coarse_lines, coarse_fragments) = crate::iteration::coarse_burn_in(resolution, burn_in, per_step)
                 .map_or((0, 0), |(c, _)| (c as u64 * c as u64, capacity(c)));
             (r * r + coarse_lines, capacity(resolution) + coarse_fragments)

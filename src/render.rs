@@ -254,12 +254,12 @@ pub fn first_bounce_per_point(options: &RenderOptions, patches: &Patches) -> boo
     options.first_shot && patches.emitters.is_empty() && !options.patch_first_bounce
 }
 
-/// Burn-in steps for `scene`: the state's missing share of further bounces falls as a^k with
-/// a the largest hemispherical albedo (directional albedo averaged over cosine-weighted
-/// incidence) of its materials, so k = log(BURN_IN_TOLERANCE) / log(a), at most MAX_BURN_IN.
-pub fn default_burn_in(scene: &Scene) -> u32 {
+/// The largest hemispherical albedo (directional albedo averaged over cosine-weighted
+/// incidence) of the scene's materials: a bound of how much of its light the scene keeps
+/// from one bounce to the next.
+pub fn largest_albedo(scene: &Scene) -> f64 {
     const POINTS: usize = 32;
-    let a = scene
+    scene
         .materials
         .iter()
         .map(|m| {
@@ -271,14 +271,39 @@ pub fn default_burn_in(scene: &Scene) -> u32 {
             });
             mean.into_iter().fold(0.0, f64::max)
         })
-        .fold(0.0, f64::max);
-    if a <= 0.0 {
+        .fold(0.0, f64::max)
+}
+
+/// Bounces until the state's missing share of further bounces, which falls as `rate`^k, is
+/// below BURN_IN_TOLERANCE: k = log(BURN_IN_TOLERANCE) / log(rate), at most MAX_BURN_IN.
+pub fn bounces_for_decay(rate: f64) -> u32 {
+    if rate <= 0.0 {
         return 0;
     }
-    if a >= 1.0 {
+    if rate >= 1.0 {
         return MAX_BURN_IN;
     }
-    ((BURN_IN_TOLERANCE.ln() / a.ln()).ceil() as u32).min(MAX_BURN_IN)
+    ((BURN_IN_TOLERANCE.ln() / rate.ln()).ceil() as u32).min(MAX_BURN_IN)
+}
+
+/// The burn-in in bundles, and the walk's measurement it was sized by (`None` where the walk
+/// was not run; docs/ALGORITHM.md 6, "Burn-in"). Two things must settle before the image's
+/// first step:
+/// - the state's mean, which needs `bounces_for_decay` of the light's measured decay per
+///   bounce (`burn_in::measured_decay`, two standard errors up; never more than the largest
+///   albedo, which is the rate where the walk is not run);
+/// - then Lbar_j, the control variates' running mean of the state, whose memory is
+///   `iteration::SETTLED_MEAN_BUNDLES` bundles: made of unconverged states it is a poorer
+///   variate (Sierpinski at 11 bundles: 6-11 % more image error than at 19).
+pub fn default_burn_in(scene: &Scene, patches: &Patches) -> (u32, Option<crate::burn_in::Decay>) {
+    let bound = largest_albedo(scene);
+    let decay = crate::burn_in::measured_decay(scene, patches);
+    let bounces = bounces_for_decay(decay.map_or(bound, |d| d.upper().min(bound)));
+    let bundles = match bounces {
+        0 => 0,
+        b => (b + crate::iteration::SETTLED_MEAN_BUNDLES).min(MAX_BURN_IN),
+    };
+    (bundles, decay)
 }
 
 /// Run statistics (`--stats`, docs/CLI.md).
@@ -322,6 +347,10 @@ pub struct RenderStats {
     pub iterations: u32,
     /// Steps before them that only advanced the state.
     pub burn_in_steps: u32,
+    /// The light's measured decay per bounce (its rate, standard error and paths) that the
+    /// default burn-in was sized by; `null` with `--burn-in` or where the walk did not run
+    /// (docs/ALGORITHM.md 6, "Burn-in").
+    pub burn_in_decay: Option<crate::burn_in::Decay>,
     /// The first of those, run at the coarser bundle resolution
     /// (`iteration::coarse_burn_in`; 0 and `None` when there was none).
     pub coarse_burn_in_steps: u32,
@@ -398,13 +427,35 @@ pub struct NoHooks;
 impl Hooks for NoHooks {}
 
 /// Steps of the iteration before the first one averaged into the image: `--burn-in`, or
-/// the scene's default; none without an iteration.
+/// the scene's default (`default_burn_in`); none without an iteration. With the default, also
+/// the walk's measurement.
 /// `bundles_per_step`: `RenderOptions::bundles_per_step_for`.
-pub fn burn_in_steps(scene: &Scene, options: &RenderOptions, bundles_per_step: u32) -> u32 {
-    match options.iterations {
-        0 => 0,
+pub fn burn_in_steps(
+    scene: &Scene,
+    patches: &Patches,
+    options: &RenderOptions,
+    bundles_per_step: u32,
+) -> (u32, Option<crate::burn_in::Decay>) {
+    match (options.iterations, options.burn_in) {
+        (0, _) => (0, None),
+        (_, Some(steps)) => (steps, None),
         // The default is in bounces; each of a step's bundles is one.
-        _ => options.burn_in.unwrap_or_else(|| default_burn_in(scene).div_ceil(bundles_per_step.max(1))),
+        _ => {
+            let (bounces, decay) = default_burn_in(scene, patches);
+            (bounces.div_ceil(bundles_per_step.max(1)), decay)
+        }
+    }
+}
+
+/// The longest burn-in `burn_in_steps` can choose, without the walk: the largest albedo's
+/// bound. Memory plans take it, so that they never plan less than the run needs.
+pub fn longest_burn_in_steps(scene: &Scene, options: &RenderOptions, bundles_per_step: u32) -> u32 {
+    match (options.iterations, options.burn_in) {
+        (0, _) => 0,
+        (_, Some(steps)) => steps,
+        _ => (bounces_for_decay(largest_albedo(scene)) + crate::iteration::SETTLED_MEAN_BUNDLES)
+            .min(MAX_BURN_IN)
+            .div_ceil(bundles_per_step.max(1)),
     }
 }
 
@@ -753,6 +804,8 @@ pub struct Renderer<'a> {
     coarse: Option<(Iteration, u32)>,
     /// Steps before the first one averaged into the image.
     burn_in: u32,
+    /// The light's decay per bounce that sized the default burn-in (`default_burn_in`).
+    burn_in_decay: Option<crate::burn_in::Decay>,
     /// The step whose estimate is the image's first: the burn-in, or a frame's first step
     /// (`render_path`), which counts its direct-light passes from there.
     image_start: u32,
@@ -830,7 +883,7 @@ impl<'a> Renderer<'a> {
                 initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, bundle_resolution);
             Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity, per_point)?)
         };
-        let burn_in = burn_in_steps(scene, options, per_step);
+        let (burn_in, burn_in_decay) = burn_in_steps(scene, patches, options, per_step);
         let coarse = match (&iteration, crate::iteration::coarse_burn_in(bundle_resolution, burn_in, per_step)) {
             (Some(full), Some((resolution, steps))) => {
                 let capacity = initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, resolution);
@@ -892,6 +945,7 @@ impl<'a> Renderer<'a> {
             iteration,
             coarse,
             burn_in,
+            burn_in_decay,
             image_start: burn_in,
             image_steps: Some(options.iterations),
             direct_schedule: DirectSchedule::of(scene, patches, given),
@@ -1316,6 +1370,7 @@ impl<'a> Renderer<'a> {
                 iteration_ms: iteration_stats.ms,
                 iterations: iteration_stats.steps.saturating_sub(self.burn_in),
                 burn_in_steps: iteration_stats.steps.min(self.burn_in),
+                burn_in_decay: self.burn_in_decay,
                 coarse_burn_in_steps: coarse_plan.map_or(0, |(_, steps)| iteration_stats.steps.min(steps)),
                 coarse_bundle_resolution: coarse_plan.map(|(resolution, _)| resolution),
                 seed: o.seed,

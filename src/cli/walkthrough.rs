@@ -111,7 +111,8 @@ pub fn run(
     firstshot::render::check_options(scene, &options)?;
     let fingerprint = fingerprint(scene, &options, &path, frames, steps);
     let patches = firstshot::scene::tessellate(scene, options.patch_size)?;
-    let burn_in = firstshot::render::burn_in_steps(scene, &options, options.bundles_per_step_for(scene, &patches));
+    let (burn_in, _) =
+        firstshot::render::burn_in_steps(scene, &patches, &options, options.bundles_per_step_for(scene, &patches));
     let resume = match args.resume {
         false => None,
         true => Some(read_resume(&plan, fingerprint, burn_in, steps, frames)?),
