@@ -56,6 +56,8 @@ pub struct Decay {
     /// The walk's population and the generations it was followed.
     pub particles: u32,
     pub generations: u32,
+    /// What the walk took, its BVH included (wall time, milliseconds).
+    pub ms: f64,
 }
 
 impl Decay {
@@ -83,6 +85,7 @@ pub fn measured_decay(scene: &Scene, patches: &Patches) -> Option<Decay> {
 /// weight grows without bound, as a product of many albedos would.
 pub fn measured_decay_with(scene: &Scene, patches: &Patches, particles: u32, generations: u32) -> Option<Decay> {
     assert!(generations >= WALK_SETTLE + 4, "too few generations to average");
+    let start = std::time::Instant::now();
     let walk = Walk::new(scene, patches)?;
     let mut population: Vec<Particle> = (0..particles).map(|i| walk.start(i)).collect();
     let mut rates = Vec::new();
@@ -127,7 +130,8 @@ pub fn measured_decay_with(scene: &Scene, patches: &Patches, particles: u32, gen
         averaged.chunks(averaged.len().div_ceil(4)).map(|c| c.iter().sum::<f64>() / c.len() as f64).collect();
     let n = runs.len() as f64;
     let variance = runs.iter().map(|r| (r - rate).powi(2)).sum::<f64>() / (n - 1.0);
-    Some(Decay { rate, standard_error: (variance / n).sqrt(), particles, generations })
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    Some(Decay { rate, standard_error: (variance / n).sqrt(), particles, generations, ms })
 }
 
 /// Where a particle's light is: the patch it reached and the point on it.

@@ -188,7 +188,9 @@ fn test05_the_walk_sizes_the_default_burn_in_and_the_bound_caps_it() {
     let settle = firstshot::iteration::SETTLED_MEAN_BUNDLES;
     assert_eq!(bundles, firstshot::render::bounces_for_decay(decay.upper()) + settle);
     // Deterministic: the same scene walks the same paths.
-    assert_eq!(firstshot::render::default_burn_in(&scene, &patches), (bundles, Some(decay)));
+    let (again, walked) = firstshot::render::default_burn_in(&scene, &patches);
+    let walked = walked.expect("a walk");
+    assert_eq!((again, walked.rate, walked.standard_error), (bundles, decay.rate, decay.standard_error));
     let given = firstshot::render::RenderOptions { burn_in: Some(5), ..options.clone() };
     assert_eq!(firstshot::render::burn_in_steps(&scene, &patches, &given, 1), (5, None));
     assert_eq!(firstshot::render::burn_in_steps(&scene, &patches, &options, 4).0, bundles.div_ceil(4));
