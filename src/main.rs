@@ -118,7 +118,7 @@ pub(crate) struct RenderArgs {
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     direct_passes: Option<u32>,
     /// Steps that advance the iteration state before any is averaged into the image
-    /// (default: from the scene's albedo).
+    /// (default: from the light's measured decay per bounce, docs/ALGORITHM.md 6).
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     burn_in: Option<u32>,
     /// After the first --direct-passes image steps, at most 16 with area lights or emitting
