@@ -10,17 +10,20 @@
 //! reflects 0.89 of red light and the walls about 0.6; lambda measures about 0.64. The bound
 //! asked for 41 bounces, the measured rate asks for 11.
 //!
-//! lambda is measured here on the CPU, once a run, by a random walk over the patches. Paths
-//! start at points uniform over the reflecting surfaces' area, each sends its light into a
-//! cosine-distributed direction, and the light is followed by ray casting (a BVH over the
-//! patches, `obvhs`). At each hit, the path's weight is multiplied by the directional albedo
-//! of the material hit at the incidence the light arrives with. A path ends when it leaves the
-//! scene or hits a back face or a light, both black. The energy left after k bounces, E_k,
-//! follows lambda^k once the dominant mode has taken over, and the rate is the ratio of the
-//! sums over the later half of the bounces.
+//! lambda is measured here on the CPU, once a run, by a random walk over the patches
+//! (`measured_decay_with` has the estimator): particles start at points uniform over the
+//! reflecting surfaces' area; at each generation every particle sends its light into a
+//! cosine-distributed direction, a ray cast (a BVH over the patches, `obvhs`) finds where it
+//! lands, and the share kept there is the directional albedo of the material at the incidence
+//! the light arrives with (nothing where it leaves the scene or meets a back face or a
+//! light, both black). A generation's rate is the population's mean share kept; the
+//! population is then resampled from where the light landed. Once the dominant mode has
+//! taken over, that rate is lambda. The burn-in is then the bounces for the state's mean
+//! plus 8 bundles for the control variates' running mean (`render::default_burn_in`).
 //!
-//! The walk is deterministic: its random numbers are seeded by the path's index alone, so
-//! every run of a scene, every shard and every resumed run gets the same burn-in.
+//! The walk is deterministic: its random numbers are seeded by the particle and the
+//! generation alone, so every run of a scene, every shard and every resumed run gets the same
+//! burn-in.
 
 use crate::scene::{MaterialKind, Patches, Scene, brdf};
 use glam::{DVec3, Vec3A};

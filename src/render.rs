@@ -131,7 +131,7 @@ pub struct RenderOptions {
     /// Passes of an image without iteration.
     pub direct_passes: u32,
     /// Steps that advance the state before any is averaged into the image; `None`: from
-    /// the scene's albedo (`default_burn_in`).
+    /// the light's measured decay per bounce (`default_burn_in`).
     pub burn_in: Option<u32>,
     /// Steps of the iteration per estimate of the direct light (Le + D, with new points on
     /// the area lights and their window item buffers, the costliest image stages); the
