@@ -188,11 +188,10 @@ impl<'a> Walk<'a> {
         if area_cdf.is_empty() {
             return None;
         }
-        let v = |p: DVec3| Vec3A::new(p.x as f32, p.y as f32, p.z as f32);
         let triangles: Vec<Triangle> = patches
             .patches
             .iter()
-            .map(|p| Triangle { v0: v(p.vertices[0]), v1: v(p.vertices[1]), v2: v(p.vertices[2]) })
+            .map(|p| Triangle { v0: single(p.vertices[0]), v1: single(p.vertices[1]), v2: single(p.vertices[2]) })
             .collect();
         let bvh = build_bvh2_from_tris(&triangles, BvhBuildParams::fast_build(), &mut Default::default());
         let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
@@ -252,8 +251,7 @@ impl<'a> Walk<'a> {
     /// The nearest patch along the ray and its distance. The back of a two-sided surface's
     /// patch is passed over: its twin's front lies at the same place.
     fn cast(&self, origin: DVec3, direction: DVec3) -> Option<(usize, f64)> {
-        let v = |p: DVec3| Vec3A::new(p.x as f32, p.y as f32, p.z as f32);
-        let ray = Ray::new_inf(v(origin), v(direction));
+        let ray = Ray::new_inf(single(origin), single(direction));
         let mut hit = RayHit::none();
         let found = self.bvh.ray_traverse(ray, &mut hit, |ray, id| {
             let index = self.bvh.primitive_indices[id] as usize;
@@ -265,6 +263,11 @@ impl<'a> Walk<'a> {
         });
         found.then(|| (self.bvh.primitive_indices[hit.primitive_id as usize] as usize, f64::from(hit.t)))
     }
+}
+
+/// `p` in single precision, as the BVH and its rays take it.
+fn single(p: DVec3) -> Vec3A {
+    Vec3A::new(p.x as f32, p.y as f32, p.z as f32)
 }
 
 /// A direction about `normal` with density cos(theta) / pi.

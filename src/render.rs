@@ -298,12 +298,17 @@ pub fn bounces_for_decay(rate: f64) -> u32 {
 pub fn default_burn_in(scene: &Scene, patches: &Patches) -> (u32, Option<crate::burn_in::Decay>) {
     let bound = largest_albedo(scene);
     let decay = crate::burn_in::measured_decay(scene, patches);
-    let bounces = bounces_for_decay(decay.map_or(bound, |d| d.upper().min(bound)));
-    let bundles = match bounces {
+    (burn_in_bundles(decay.map_or(bound, |d| d.upper().min(bound))), decay)
+}
+
+/// The burn-in in bundles for a decay `rate` per bounce: `bounces_for_decay`, then
+/// `iteration::SETTLED_MEAN_BUNDLES` for Lbar_j (none where no bounce is needed), at most
+/// MAX_BURN_IN.
+fn burn_in_bundles(rate: f64) -> u32 {
+    match bounces_for_decay(rate) {
         0 => 0,
         b => (b + crate::iteration::SETTLED_MEAN_BUNDLES).min(MAX_BURN_IN),
-    };
-    (bundles, decay)
+    }
 }
 
 /// Run statistics (`--stats`, docs/CLI.md).
@@ -347,8 +352,8 @@ pub struct RenderStats {
     pub iterations: u32,
     /// Steps before them that only advanced the state.
     pub burn_in_steps: u32,
-    /// The light's measured decay per bounce (its rate, standard error and paths) that the
-    /// default burn-in was sized by; `null` with `--burn-in` or where the walk did not run
+    /// The light's measured decay per bounce (its rate, standard error, particles,
+    /// generations and milliseconds) that the default burn-in was sized by; `null` with `--burn-in` or where the walk did not run
     /// (docs/ALGORITHM.md 6, "Burn-in").
     pub burn_in_decay: Option<crate::burn_in::Decay>,
     /// The first of those, run at the coarser bundle resolution
@@ -453,9 +458,7 @@ pub fn longest_burn_in_steps(scene: &Scene, options: &RenderOptions, bundles_per
     match (options.iterations, options.burn_in) {
         (0, _) => 0,
         (_, Some(steps)) => steps,
-        _ => (bounces_for_decay(largest_albedo(scene)) + crate::iteration::SETTLED_MEAN_BUNDLES)
-            .min(MAX_BURN_IN)
-            .div_ceil(bundles_per_step.max(1)),
+        _ => burn_in_bundles(largest_albedo(scene)).div_ceil(bundles_per_step.max(1)),
     }
 }
 

@@ -111,11 +111,15 @@ pub fn run(
     firstshot::render::check_options(scene, &options)?;
     let fingerprint = fingerprint(scene, &options, &path, frames, steps);
     let patches = firstshot::scene::tessellate(scene, options.patch_size)?;
-    let (burn_in, _) =
-        firstshot::render::burn_in_steps(scene, &patches, &options, options.bundles_per_step_for(scene, &patches));
     let resume = match args.resume {
         false => None,
-        true => Some(read_resume(&plan, fingerprint, burn_in, steps, frames)?),
+        true => {
+            // Only a resume needs the burn-in before the renderer, which sizes it again (its
+            // default walks the patches, src/burn_in.rs).
+            let per_step = options.bundles_per_step_for(scene, &patches);
+            let (burn_in, _) = firstshot::render::burn_in_steps(scene, &patches, &options, per_step);
+            Some(read_resume(&plan, fingerprint, burn_in, steps, frames)?)
+        }
     };
     let ctx = Context::new(&args.adapter)?;
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
