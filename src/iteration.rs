@@ -69,6 +69,141 @@ pub struct ImagePlan {
     pub steps: Option<u64>,
 }
 
+/// A bundle's grid: `resolution` lines along an edge of the square around the scene's
+/// bounding sphere, all of them (one level) or, where a fine window is set, only inside it,
+/// with one wide line for each `wide` x `wide` block of them outside (docs/ALGORITHM.md
+/// 6, "Two levels of lines").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Grid {
+    pub resolution: u32,
+    pub window: Option<FineWindow>,
+}
+
+/// The patches that need the fine lines (the glossy ones, `BundleNeeds`), as a sphere that
+/// holds them: each bundle keeps its fine lines only around the sphere's projection, a
+/// square of about its diameter whatever the direction, and takes wide lines, `wide`
+/// fine lines wide, everywhere else. A wide line is one sample of the transfer over its
+/// whole square (its radiance counts `wide`^2 times a fine line's), which is what the
+/// large diffuse patches outside need; the Sierpinski room's walls took three quarters of
+/// a step's lines at the fractal's resolution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FineWindow {
+    pub centre: DVec3,
+    pub radius: f64,
+    /// Fine lines along a wide line's edge: 2 or 4.
+    pub wide: u32,
+}
+
+impl FineWindow {
+    /// Fine lines from the sphere's projected centre to the window's edge, for lines `pixel`
+    /// apart: the radius and one line of margin (a fragment's centre lies inside its
+    /// triangle's projection, which lies inside the sphere's).
+    pub fn extent(&self, pixel: f64) -> f64 {
+        self.radius / pixel + 1.0
+    }
+}
+
+/// Half the side of the square a grid at `resolution` spans around a sphere of `radius`:
+/// `wide` lines of margin on each side, so that a grid shifted by up to half a wide line
+/// still covers the sphere.
+pub fn grid_half_extent(radius: f64, resolution: u32, wide: u32) -> f64 {
+    let r = resolution as f64;
+    radius * r / (r - 2.0 * wide as f64)
+}
+
+impl Grid {
+    pub fn one_level(resolution: u32) -> Self {
+        Grid { resolution, window: None }
+    }
+
+    /// Fine lines along a wide line's edge (1 with one level).
+    pub fn wide(&self) -> u32 {
+        self.window.map_or(1, |w| w.wide)
+    }
+
+    /// The largest side of a bundle's fine window in fine lines, in a scene's bounding
+    /// sphere of `radius`; the resolution with one level. A window spans
+    /// floor((a + e) / k) - floor((a - e) / k) + 1 <= floor(2 e / k) + 2 wide lines.
+    pub fn largest_window(&self, radius: f64) -> u32 {
+        match self.window {
+            None => self.resolution,
+            Some(w) => {
+                let k = w.wide;
+                let pixel = 2.0 * grid_half_extent(radius, self.resolution, k) / self.resolution as f64;
+                let side = ((2.0 * w.extent(pixel) / k as f64).floor() as u32 + 2) * k;
+                side.min(self.resolution)
+            }
+        }
+    }
+
+    /// The lines a bundle of this grid can have, which the line buffers hold.
+    pub fn line_capacity(&self, radius: f64) -> u32 {
+        let r = self.resolution;
+        match self.window {
+            None => r * r,
+            Some(w) => {
+                let side = self.largest_window(radius);
+                (r / w.wide) * (r / w.wide) + side * side
+            }
+        }
+    }
+}
+
+/// The widths a wide line may have, in fine lines (`--wide-lines`; 1: one level).
+pub const WIDE_LINES_CHOICES: [u32; 3] = [1, 2, 4];
+
+/// The wide lines' width where it is not asked for (`--wide-lines auto`): the widest of 4
+/// and 2 fine lines that keeps a wide line at most twice as wide as the image's need asks of
+/// a line (`BundleNeeds::image`), where the glossy patches set the resolution (their need
+/// above the image's) and a step draws one bundle; else 1 (one level). The image's need is
+/// where the gather's blur at contacts stays small (docs/ALGORITHM.md 6, "Bundle
+/// resolution"), and twice it is a judgement: on the Sierpinski scene at 256 x 256 wide
+/// lines of 1.1 and 2.2 times its width left the error after 60 and 300 steps as it was,
+/// but the Cornell boxes' uniform grids at twice their rule's width had 20-30 % more error
+/// after 1000 steps, at their contacts (docs/PERFORMANCE.md, "Two levels of lines").
+pub fn auto_wide_lines(needs: &BundleNeeds, resolution: u32, per_step: u32) -> u32 {
+    if per_step != 1 || needs.patches <= needs.image {
+        return 1;
+    }
+    [4, 2]
+        .into_iter()
+        .find(|&k| resolution.is_multiple_of(k) && 2.0 * (resolution / k) as f64 >= needs.image)
+        .unwrap_or(1)
+}
+
+/// The fine window of a grid at `resolution` with wide lines `wide` fine lines wide,
+/// around the glossy patches (the ones whose size set the resolution, `BundleNeeds`), for a
+/// scene in a sphere of `radius`; `None` where there is none or it would not save half the
+/// lines.
+pub fn fine_window(
+    patches: &Patches,
+    materials: &[crate::scene::Material],
+    radius: f64,
+    resolution: u32,
+    wide: u32,
+) -> Option<FineWindow> {
+    if wide < 2 || !resolution.is_multiple_of(wide) || resolution / wide < MIN_BUNDLE_RESOLUTION {
+        return None;
+    }
+    let (mut low, mut high) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    let glossy = patches.patches.iter().filter(|p| is_glossy(p, materials));
+    for p in glossy.clone() {
+        for v in p.vertices {
+            low = low.min(v);
+            high = high.max(v);
+        }
+    }
+    if low.x > high.x {
+        return None;
+    }
+    let centre = 0.5 * (low + high);
+    let sphere = glossy.flat_map(|p| p.vertices).map(|v| v.distance(centre)).fold(0.0f64, f64::max);
+    let window = FineWindow { centre, radius: sphere, wide };
+    let grid = Grid { resolution, window: Some(window) };
+    let lines = resolution as u64 * resolution as u64;
+    (2 * grid.line_capacity(radius) as u64 <= lines).then_some(window)
+}
+
 /// The bundle of step `step` (the one place a `GpuBundle` is made): direction uniform on
 /// the sphere, grid rotated uniformly about it and shifted by a uniform sub-pixel offset;
 /// the grid covers the bounding sphere. The directions are stratified: over the image's own
@@ -82,9 +217,11 @@ pub fn bundle_of_step(
     bundle: StepBundle,
     image: Option<ImagePlan>,
     scene: &BundleScene,
-    resolution: u32,
+    grid: &Grid,
     capacity: u32,
 ) -> (GpuBundle, StepRng) {
+    let resolution = grid.resolution;
+    let k = grid.wide();
     // The bundles of all steps form one sequence: bundle q of step k is its element
     // k per_step + q (with one bundle a step, element k).
     let index = step * bundle.per_step as u64 + bundle.index as u64;
@@ -103,11 +240,30 @@ pub fn bundle_of_step(
     let t2 = d.cross(t1);
     let u = angle.cos() * t1 + angle.sin() * t2;
     let v = d.cross(u);
-    // One pixel of margin on each side, so the shifted grid still covers the sphere.
+    // A wide line of margin on each side, so the shifted grid still covers the sphere;
+    // the shift uniform over a wide line, so that a wide line's point is uniform over
+    // its square as a fine line's is over its own.
     let r = resolution as f64;
-    let half = scene.radius * r / (r - 2.0);
+    let half = grid_half_extent(scene.radius, resolution, k);
     let pixel = 2.0 * half / r;
-    let shift = [(rng.uniform() - 0.5) * 2.0 / r, (rng.uniform() - 0.5) * 2.0 / r];
+    let kf = k as f64;
+    let shift = [(rng.uniform() - 0.5) * 2.0 * kf / r, (rng.uniform() - 0.5) * 2.0 * kf / r];
+    // The fine window: the lines around the projection of the fine patches' sphere, in
+    // whole wide lines (`FineWindow`).
+    let (fine_rect, wide_lines) = match grid.window {
+        None => ([0, 0, resolution, resolution], 0),
+        Some(w) => {
+            let c = w.centre - scene.centre;
+            let at = [0.5 * (c.dot(u) / half + shift[0] + 1.0) * r, 0.5 * (1.0 - (c.dot(v) / half + shift[1])) * r];
+            let extent = w.extent(pixel);
+            let [x0, x1, y0, y1] = [at[0] - extent, at[0] + extent, at[1] - extent, at[1] + extent]
+                .map(|e| ((e / kf).floor().clamp(0.0, r / kf) as u32) * k);
+            let (x1, y1) = ((x1 + k).min(resolution), (y1 + k).min(resolution));
+            ([x0, y0, x1 - x0, y1 - y0], (resolution / k) * (resolution / k))
+        }
+    };
+    let line_count = wide_lines + fine_rect[2] * fine_rect[3];
+    debug_assert!(line_count <= grid.line_capacity(scene.radius));
     let f = |v: DVec3, w: f64| [v.x as f32, v.y as f32, v.z as f32, w as f32];
     let e = scene.environment;
     let bundle = GpuBundle {
@@ -129,6 +285,11 @@ pub fn bundle_of_step(
         // that its directions are one bundle's stratified set (`rng::image_direction`).
         pixel_shuffle: image
             .map_or(0, |p| (crate::rng::splitmix64(seed ^ p.start.wrapping_mul(0x9e37_79b9_7f4a_7c15)) >> 32) as u32),
+        fine_rect,
+        wide: k,
+        line_capacity: grid.line_capacity(scene.radius),
+        wide_lines,
+        line_count,
     };
     (bundle, rng)
 }
@@ -407,9 +568,14 @@ pub struct Iteration {
     finalize: BundleFinalize,
     pub capacity: u32,
     pub resolution: u32,
+    /// The grid's levels (`Grid`).
+    pub grid: Grid,
     pub gather: GatherBuffers,
     /// Whether the reflection also writes Lfs_j for the image (`new`).
     image_first_bounce_per_point: bool,
+    /// The fine windows of the step's bundles (`write_bundles`), the scissor of their fine
+    /// lines' draw.
+    fine_rects: std::sync::Mutex<[[u32; 4]; BUNDLES_PER_STEP as usize]>,
     arrays: StepArrays,
     _owned: [wgpu::Buffer; 3],
 }
@@ -432,7 +598,7 @@ impl Iteration {
     pub fn new(
         ctx: &Context,
         scene: &SceneBuffers,
-        resolution: u32,
+        grid: Grid,
         capacity: u64,
         image_first_bounce_per_point: bool,
     ) -> Result<Self> {
@@ -445,32 +611,35 @@ impl Iteration {
             image_senders: zeroed(device, "firstshot.iteration.image_senders", IMAGE_SENDERS, n, pages, none),
             sums: zeroed(device, "firstshot.iteration.sums", TRANSFER_SUMS, n, pages, none),
         };
-        Self::with_arrays(ctx, scene, arrays, resolution, capacity, image_first_bounce_per_point, None)
+        Self::with_arrays(ctx, scene, arrays, grid, capacity, image_first_bounce_per_point, None)
     }
 
     /// An iteration at `resolution` with room for `capacity` fragments that shares this
     /// one's per-patch arrays and its pipelines (only the line buffers and bind groups are
     /// new: building the pipelines again took about 45 ms on lavapipe): the coarse burn-in
     /// (`coarse_burn_in`), or this resolution with a larger fragment list after an overflow.
-    pub fn resized(&self, ctx: &Context, scene: &SceneBuffers, resolution: u32, capacity: u64) -> Result<Self> {
+    pub fn resized(&self, ctx: &Context, scene: &SceneBuffers, grid: Grid, capacity: u64) -> Result<Self> {
         let per_point = self.image_first_bounce_per_point;
-        Self::with_arrays(ctx, scene, self.arrays.clone(), resolution, capacity, per_point, Some(self))
+        Self::with_arrays(ctx, scene, self.arrays.clone(), grid, capacity, per_point, Some(self))
     }
 
     fn with_arrays(
         ctx: &Context,
         scene: &SceneBuffers,
         arrays: StepArrays,
-        resolution: u32,
+        grid: Grid,
         capacity: u64,
         image_first_bounce_per_point: bool,
         like: Option<&Iteration>,
     ) -> Result<Self> {
+        let resolution = grid.resolution;
         let device = &ctx.device;
         let limits = ctx.limits();
         // The resolution and the line table were checked by `render::check_limits`; the
         // capacity grows at run time (overflow and redo), so it is checked here.
-        let lines = resolution * resolution;
+        // At most resolution^2 (`FineWindow` is only chosen where it saves lines), which
+        // `render::check_limits` checked.
+        let lines = grid.line_capacity(scene.radius);
         let max = max_capacity(&limits, resolution);
         if capacity > max {
             return Err(Error::Limits(format!(
@@ -535,7 +704,7 @@ impl Iteration {
                     (&long_lines).into(),
                     outgoing.resource(),
                 ],
-                resolution,
+                grid,
                 like.map(|l| &l.visibility),
             ),
             transfer: BundleTransfer::new(
@@ -579,6 +748,7 @@ impl Iteration {
                 image_senders: image_senders.pages.clone(),
             },
             image_first_bounce_per_point,
+            fine_rects: std::sync::Mutex::new([[0, 0, resolution, resolution]; BUNDLES_PER_STEP as usize]),
             bundle,
             step_bundles,
             counts,
@@ -588,6 +758,7 @@ impl Iteration {
             overflow,
             capacity: capacity as u32,
             resolution,
+            grid,
             arrays,
             _owned: [fragments, spill, long_lines],
         })
@@ -608,7 +779,8 @@ impl Iteration {
         let mut bundles = Vec::with_capacity(per_step as usize);
         for index in 0..per_step {
             let which = StepBundle { index, per_step };
-            let (bundle, rng) = bundle_of_step(seed, step, which, image, scene, self.resolution, self.capacity);
+            let (bundle, rng) = bundle_of_step(seed, step, which, image, scene, &self.grid, self.capacity);
+            self.fine_rects.lock().expect("not poisoned")[index as usize] = bundle.fine_rect;
             bundles.push(bundle);
             first.get_or_insert(rng);
         }
@@ -634,7 +806,13 @@ impl Iteration {
                 }),
             ),
             ("reflect", Box::new(move |e: &mut wgpu::CommandEncoder| self.reflect.record(e))),
-            ("visibility", Box::new(move |e: &mut wgpu::CommandEncoder| self.visibility.record(e, &scene.raster))),
+            (
+                "visibility",
+                Box::new(move |e: &mut wgpu::CommandEncoder| {
+                    let rect = self.fine_rects.lock().expect("not poisoned")[index as usize];
+                    self.visibility.record(e, &scene.raster, rect)
+                }),
+            ),
             ("transfer", Box::new(move |e: &mut wgpu::CommandEncoder| self.transfer.record(e))),
             ("finalize", Box::new(move |e: &mut wgpu::CommandEncoder| self.finalize.record(e))),
         ]
@@ -664,6 +842,20 @@ impl Iteration {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn wide_lines_where_the_glossy_patches_set_the_grid() {
+        let needs =
+            |patches: f64, image: f64| BundleNeeds { patches, image, patch_count: 22_420, view_pixels: 256 * 256 };
+        // The Sierpinski scene at 256 x 256: 176 lines would be 2.2 times the image's width.
+        assert_eq!(auto_wide_lines(&needs(645.0, 384.0), 704, 1), 2);
+        assert_eq!(auto_wide_lines(&needs(645.0, 350.0), 704, 1), 4, "176 >= 350 / 2");
+        assert_eq!(auto_wide_lines(&needs(645.0, 384.0), 704, 4), 1, "four bundles a step");
+        assert_eq!(auto_wide_lines(&needs(300.0, 384.0), 384, 1), 1, "the image sets the grid");
+        assert_eq!(auto_wide_lines(&needs(645.0, 0.0), 704, 1), 4, "no view");
+        assert_eq!(auto_wide_lines(&needs(1024.0, 900.0), 1024, 1), 2);
+        assert_eq!(auto_wide_lines(&needs(1200.0, 1100.0), 1024, 1), 1, "512 < 1100 / 2");
+    }
 
     #[test]
     fn four_bundles_where_the_image_sets_the_grid_and_the_patches_are_few() {

@@ -362,6 +362,20 @@ pub struct GpuBundle {
     /// gathers once a step, always through the same bundle (whose directions are a
     /// stratified set, `rng::image_direction`), and no fixed pattern of classes shows.
     pub pixel_shuffle: u32,
+    /// The fine window of a grid of two levels (`iteration::FineWindow`): x0, y0, width and
+    /// height in fine lines, multiples of `wide`. Its lines are the grid's own; outside
+    /// it every `wide` x `wide` block of them is one wide line. With one level (wide
+    /// 1) the whole grid: 0, 0, resolution, resolution.
+    pub fine_rect: [u32; 4],
+    /// Fine lines along a wide line's edge: 1 (one level), 2 or 4.
+    pub wide: u32,
+    /// Lines the buffers hold (their allocation): the transfer's fragment list starts the
+    /// long lines' slices past that many buckets.
+    pub line_capacity: u32,
+    /// Wide lines, (resolution / wide)^2, numbered first; 0 with one level.
+    pub wide_lines: u32,
+    /// This bundle's lines: wide_lines + the fine window's width x height.
+    pub line_count: u32,
 }
 
 /// A vertex of the rasterised patch triangles: position and patch id (with
@@ -415,7 +429,7 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuWindowFace => "WindowFace" { view, tile }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
         layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
-        layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state, image_step, pixel_class, pixel_stride, pixel_shuffle }),
+        layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state, image_step, pixel_class, pixel_stride, pixel_shuffle, fine_rect, wide, line_capacity, wide_lines, line_count }),
     ]
 }
 

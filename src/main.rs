@@ -135,6 +135,14 @@ pub(crate) struct RenderArgs {
     /// step).
     #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = parse_bundles_per_step)]
     bundles_per_step: Option<BundlesPerStep>,
+    /// Lines of two widths in each bundle: fine lines (the --bundle-resolution) only in a
+    /// window around the projection of the glossy patches, and outside it lines N fine lines
+    /// wide: 1 (one level), 2, 4, or "auto" (the default: the widest that is at most twice
+    /// the line width the image asks for, where the glossy patches set the bundle
+    /// resolution and a step draws one bundle, else 1; docs/ALGORITHM.md 6, "Two levels of
+    /// lines")
+    #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = parse_wide_lines)]
+    wide_lines: Option<WideLines>,
     /// Take each surface's first reflection of the lights, as the image gathers it from that
     /// surface, at the patch level (the paper's method) instead of at the point the gather
     /// meets it (the default, unless a light is an emitting shape).
@@ -483,6 +491,9 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     if let Some(b) = args.bundles_per_step {
         options.bundles_per_step = b.0;
     }
+    if let Some(w) = args.wide_lines {
+        options.wide_lines = w.0;
+    }
     if let Some(v) = args.window_steps {
         if v == 0 {
             return Err(usage("--window-steps 0: expected at least 1 step".into()));
@@ -810,6 +821,23 @@ fn parse_bundles_per_step(value: &str) -> std::result::Result<BundlesPerStep, St
             .filter(|n| choices.contains(n))
             .map(|n| BundlesPerStep(Some(n)))
             .ok_or_else(|| format!("expected 1, 4 or \"auto\", got {value:?}")),
+    }
+}
+
+/// `--wide-lines`: 1, 2, 4, or "auto" (`None`).
+#[derive(Debug, Clone, Copy)]
+struct WideLines(Option<u32>);
+
+fn parse_wide_lines(value: &str) -> std::result::Result<WideLines, String> {
+    let choices = firstshot::iteration::WIDE_LINES_CHOICES;
+    match value {
+        "auto" => Ok(WideLines(None)),
+        _ => value
+            .parse::<u32>()
+            .ok()
+            .filter(|n| choices.contains(n))
+            .map(|n| WideLines(Some(n)))
+            .ok_or_else(|| format!("expected 1, 2, 4 or \"auto\", got {value:?}")),
     }
 }
 

@@ -144,6 +144,10 @@ pub struct RenderOptions {
     /// 2 x 2 block gathers through its own; `None`: chosen from the patches and the views
     /// (`iteration::auto_bundles_per_step`).
     pub bundles_per_step: Option<u32>,
+    /// Fine lines along the edge of a bundle's wide line outside the fine window around the
+    /// glossy patches: 1 (one level), 2 or 4 (`iteration::WIDE_LINES_CHOICES`); `None`:
+    /// chosen from the patches and the views (`iteration::auto_wide_lines`).
+    pub wide_lines: Option<u32>,
     /// The gather takes every sender's first reflection of the lights at the patch level
     /// (the paper's Lfs_j at the patch's centre) instead of per point
     /// (`first_bounce_per_point`, docs/ALGORITHM.md 6).
@@ -183,6 +187,7 @@ impl RenderOptions {
             window_steps: DEFAULT_WINDOW_STEPS,
             cameras: Vec::new(),
             bundles_per_step: scene.settings.bundles_per_step,
+            wide_lines: None,
             patch_first_bounce: false,
             gather: Default::default(),
             camera_supersample: None,
@@ -230,6 +235,20 @@ impl RenderOptions {
         let resolution =
             self.bundle_resolution.unwrap_or_else(|| needs.resolution() / crate::iteration::pixel_stride(per_step));
         (resolution, per_step)
+    }
+
+    /// The grid of a render's bundles at `resolution` (`bundles_for`) with `per_step` of them
+    /// a step, around a sphere of `radius`: a fine window around the glossy patches and wide
+    /// lines outside it where `wide_lines` (or the automatic choice) asks for them and they
+    /// save lines (`iteration::fine_window`), else one level.
+    pub fn grid_for(&self, scene: &Scene, patches: &Patches, resolution: u32, per_step: u32) -> crate::iteration::Grid {
+        let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+        let wide = self.wide_lines.unwrap_or_else(|| {
+            let needs = crate::iteration::BundleNeeds::of(patches, &scene.materials, radius, &self.views(scene));
+            crate::iteration::auto_wide_lines(&needs, resolution, per_step)
+        });
+        let window = crate::iteration::fine_window(patches, &scene.materials, radius, resolution, wide);
+        crate::iteration::Grid { resolution, window }
     }
 
     /// The views of the render, in order: `cameras`, or the scene's camera at `width` x
@@ -340,6 +359,10 @@ pub struct RenderStats {
     pub bundle_resolution: u32,
     /// Bundles each step drew (`--bundles-per-step`), each at `bundle_resolution`.
     pub bundles_per_step: u32,
+    /// Fine lines along a wide line's edge outside the fine window (`--wide-lines`; 1: one
+    /// level), and the lines the buffers held for each bundle (`iteration::Grid`).
+    pub wide_lines: u32,
+    pub bundle_lines: u32,
     /// How the image's gather finished its pixels: "fused" (one pass) or "split"
     /// (`--gather`, `image_estimate::fused_gather`).
     pub gather: &'static str,
@@ -884,13 +907,20 @@ impl<'a> Renderer<'a> {
         } else {
             let capacity =
                 initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, bundle_resolution);
-            Some(Iteration::new(ctx, &buffers, bundle_resolution, capacity, per_point)?)
+            let grid = options.grid_for(scene, patches, bundle_resolution, per_step);
+            if grid.window.is_some() {
+                let materials = &scene.materials;
+                buffers
+                    .raster
+                    .set_fine_patches(|p| crate::iteration::is_glossy(&patches.patches[p as usize], materials));
+            }
+            Some(Iteration::new(ctx, &buffers, grid, capacity, per_point)?)
         };
         let (burn_in, burn_in_decay) = burn_in_steps(scene, patches, options, per_step);
         let coarse = match (&iteration, crate::iteration::coarse_burn_in(bundle_resolution, burn_in, per_step)) {
             (Some(full), Some((resolution, steps))) => {
                 let capacity = initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, resolution);
-                Some((full.resized(ctx, &buffers, resolution, capacity)?, steps))
+                Some((full.resized(ctx, &buffers, crate::iteration::Grid::one_level(resolution), capacity)?, steps))
             }
             _ => None,
         };
@@ -1265,12 +1295,12 @@ impl<'a> Renderer<'a> {
             && coarse.overflowed(ctx)?
         {
             let capacity = (coarse.capacity as u64).saturating_mul(2);
-            self.coarse = Some((coarse.resized(ctx, &self.buffers, coarse.resolution, capacity)?, *steps));
+            self.coarse = Some((coarse.resized(ctx, &self.buffers, coarse.grid, capacity)?, *steps));
         }
         let full = self.iteration();
         if full.overflowed(ctx)? {
             let capacity = (full.capacity as u64).saturating_mul(2);
-            let iteration = full.resized(ctx, &self.buffers, full.resolution, capacity)?;
+            let iteration = full.resized(ctx, &self.buffers, full.grid, capacity)?;
             for view in &mut self.views {
                 view.estimate.rebind_gather(device, &iteration.gather);
             }
@@ -1367,6 +1397,8 @@ impl<'a> Renderer<'a> {
                 memory: crate::memory::MemoryPlan { peak_rss_bytes: crate::memory::peak_rss(), ..self.memory.clone() },
                 bundle_resolution: self.bundle_resolution,
                 bundles_per_step: self.per_step,
+                wide_lines: self.iteration.as_ref().map_or(1, |i| i.grid.wide()),
+                bundle_lines: self.iteration.as_ref().map_or(0, |i| i.grid.line_capacity(self.buffers.radius)),
                 gather: self.views[0].estimate.passes().name(),
                 bundle_capacity: iteration_stats.capacity,
                 iteration_ms_median: iteration_stats.step_ms_median,

@@ -119,6 +119,7 @@ fn test02_usage_errors_exit_2_and_write_nothing() {
         (vec!["--bundle-resolution", "fine"], "expected a number of pixels or \"auto\""),
         (vec!["--hemicube-resolution", "0"], "--hemicube-resolution 0: expected 1 to 16384"),
         (vec!["--hemicube-resolution", "fine"], "expected a number of pixels or \"auto\""),
+        (vec!["--wide-lines", "3"], "expected 1, 2, 4 or \"auto\", got \"3\""),
         (vec!["--camera", "side"], "--camera side: the scene has no camera \"side\"; its cameras are \"camera\""),
     ] {
         let err = refused_render(&scratch, &[&[cb.as_str()], &args[..]].concat(), "x.exr");

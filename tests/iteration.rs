@@ -90,22 +90,6 @@ fn test05_bright_furnace_converges_with_bounded_variance() {
     }
 }
 
-/// Form factor from a differential area at `x` with normal `n` to a polygon (Lambert's
-/// contour formula), the test's own oracle.
-fn point_to_polygon(x: DVec3, n: DVec3, polygon: &[DVec3]) -> f64 {
-    let mut sum = 0.0;
-    for i in 0..polygon.len() {
-        let a = (polygon[i] - x).normalize();
-        let b = (polygon[(i + 1) % polygon.len()] - x).normalize();
-        let angle = a.dot(b).clamp(-1.0, 1.0).acos();
-        let c = a.cross(b);
-        if c.length() > 0.0 {
-            sum += angle * n.dot(c.normalize());
-        }
-    }
-    (sum / (2.0 * std::f64::consts::PI)).abs()
-}
-
 #[test]
 fn test02_received_radiance_matches_the_form_factor() {
     let Some(ctx) = gpu() else { return };

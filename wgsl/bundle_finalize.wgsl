@@ -27,7 +27,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     let bits = max_bits[0];
     let e = i32((bits >> 23u) & 0xffu) - 126;
-    let scale = exp2(f32(30 - e));
+    // bundle_transfer's scale of a fine line's radiance (a wide line's counts wide^2 times).
+    let scale = exp2(f32(30 - e)) / f32(bundle.wide * bundle.wide);
     var j_value = vec3<f32>(0.0);
     for (var c = 0u; c < 3u; c++) {
         let lo = sums_at(6u * j + 2u * c);

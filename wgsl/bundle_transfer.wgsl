@@ -64,7 +64,7 @@ const LONG_LINES_INVOCATIONS: u32 = LONG_LINES_WORKGROUPS * 64u;
 @compute @workgroup_size(64)
 fn gather_long_lines(@builtin(global_invocation_id) gid: vec3<u32>) {
     let listed = min(atomicLoad(&tally[TALLY_LONG_LINES]), bundle.capacity);
-    let buckets = bundle.resolution * bundle.resolution * LINE_BUCKET;
+    let buckets = bundle.line_capacity * LINE_BUCKET;
     for (var i = gid.x; i < listed; i += LONG_LINES_INVOCATIONS) {
         let line = long_lines[i];
         let n = counts[line];
@@ -94,7 +94,7 @@ fn gather_long_lines(@builtin(global_invocation_id) gid: vec3<u32>) {
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let line = gid.x + gid.y * groups.x * 64u;
-    if (line >= bundle.resolution * bundle.resolution) {
+    if (line >= bundle.line_count) {
         return;
     }
     let n = counts[line];
@@ -117,7 +117,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         }
         fragments[b] = item;
     }
-    let scale = transfer_scale(max_bits[0]);
+    // A wide line samples wide^2 fine lines' squares: its radiance counts that many
+    // times. The scale leaves room for it (bundle_finalize divides by the same).
+    let fine_scale = transfer_scale(max_bits[0]) / f32(bundle.wide * bundle.wide);
+    let scale = select(fine_scale, transfer_scale(max_bits[0]), line < bundle.wide_lines);
     for (var k = begin; k < end; k++) {
         let j = fragments[k].y & ~FRAGMENT_FRONT_BIT;
         let front = (fragments[k].y & FRAGMENT_FRONT_BIT) != 0u;

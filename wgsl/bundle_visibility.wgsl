@@ -32,30 +32,58 @@ struct VertexOut {
     @location(1) @interpolate(flat) patch_id: u32,
     @location(2) @interpolate(flat) lattice_word: u32,
     @location(3) lattice: vec2<f32>,
+    @location(4) @interpolate(flat) level: u32,
 }
 
 @vertex
-fn vs_main(@location(0) position: vec3<f32>, @location(1) patch_id: u32, @location(2) lattice_word: u32) -> VertexOut {
+fn vs_main(
+    @location(0) position: vec3<f32>,
+    @location(1) patch_id: u32,
+    @location(2) lattice_word: u32,
+    @builtin(instance_index) instance: u32,
+) -> VertexOut {
     let rel = position - bundle.centre.xyz;
     let depth = dot(rel, bundle.direction.xyz);
     var out: VertexOut;
-    out.clip = vec4<f32>(
-        dot(rel, bundle.axis_u.xyz) + bundle.axis_u.w,
-        dot(rel, bundle.axis_v.xyz) + bundle.axis_v.w,
-        clamp(0.5 + 0.49 * depth * bundle.centre.w, 0.0, 1.0),
-        1.0);
+    let clip = vec2<f32>(dot(rel, bundle.axis_u.xyz) + bundle.axis_u.w, dot(rel, bundle.axis_v.xyz) + bundle.axis_v.w);
+    // Instance 0 draws the wide lines: the whole grid in a viewport of resolution / wide
+    // pixels. Instance 1 the fine lines: the whole grid's, the scissor keeping the fine
+    // window's (one level: instance 1 alone, whose window is the whole grid). The same clip
+    // coordinates in both, as with one level: the rasteriser then interpolates the same
+    // depth for back-to-back twins, which the transfer's order needs.
+    out.clip = vec4<f32>(clip, clamp(0.5 + 0.49 * depth * bundle.centre.w, 0.0, 1.0), 1.0);
     out.depth = depth;
     let id = patch_id & ~VERTEX_TWIN_BIT;
     out.patch_id = id | select(0u, FRAGMENT_FRONT_BIT, outgoing_at(id).w > 0.0);
     out.lattice_word = lattice_word;
     out.lattice = lattice_corner(lattice_word);
+    out.level = instance;
     return out;
 }
 
 @fragment
 fn fs_fill(in: VertexOut) {
     let pixel = vec2<u32>(in.clip.xy);
-    let line = pixel.y * bundle.resolution + pixel.x;
+    var line: u32;
+    let rect = bundle.fine_rect;
+    let size = rect.zw;
+    if (in.level == 1u) {
+        // A fine line, inside the fine window (the scissor).
+        let local = pixel - rect.xy;
+        if (any(pixel < rect.xy) || any(local >= size)) {
+            return;
+        }
+        line = bundle.wide_lines + local.y * size.x + local.x;
+    } else {
+        // A wide line, unless the fine window covers it.
+        let k = bundle.wide;
+        let low = rect.xy / k;
+        let high = (rect.xy + size) / k;
+        if (all(pixel >= low) && all(pixel < high)) {
+            return;
+        }
+        line = pixel.y * (bundle.resolution / k) + pixel.x;
+    }
     let front = in.patch_id & FRAGMENT_FRONT_BIT;
     let patch_id = lattice_patch(in.patch_id & ~FRAGMENT_FRONT_BIT, in.lattice_word, in.lattice) | front;
     let fragment = vec2<u32>(bitcast<u32>(in.depth), patch_id);

@@ -606,24 +606,38 @@ struct OnLine {
     end: u32,
     lo: u32,
     outside: bool,
+    // The line's width in fine lines: 1, or a wide line's `wide`.
+    spacing: f32,
 }
 
-// Where x falls on this step's grid, in lines (the cell is its integer part); negative or
-// past the resolution when x projects off the grid.
+// Where x falls on this step's grid, in fine lines (the cell is its integer part); negative
+// or past the resolution when x projects off the grid.
 fn cell_of(x: vec3<f32>) -> vec2<f32> {
     let rel = x - this_bundle.centre.xyz;
     let clip = vec2<f32>(dot(rel, this_bundle.axis_u.xyz) + this_bundle.axis_u.w, dot(rel, this_bundle.axis_v.xyz) + this_bundle.axis_v.w);
     return vec2<f32>(0.5 * (clip.x + 1.0), 0.5 * (1.0 - clip.y)) * f32(this_bundle.resolution);
 }
 
-// The line of grid cell `cell` with `lo` at its start (`search` sets it); `outside` off the
-// grid.
+// The line through fine cell `cell` with `lo` at its start (`search` sets it): the fine line
+// inside the fine window, the wide line that holds the cell outside it (a grid of two
+// levels, `bundle_visibility`); `outside` off the grid.
 fn line_at(cell: vec2<i32>) -> OnLine {
     let r = i32(this_bundle.resolution);
     if (any(cell < vec2<i32>(0)) || any(cell >= vec2<i32>(r))) {
-        return OnLine(0u, 0u, 0u, true);
+        return OnLine(0u, 0u, 0u, true, 1.0);
     }
-    let line = u32(cell.y) * this_bundle.resolution + u32(cell.x);
+    let c = vec2<u32>(cell);
+    let rect = this_bundle.fine_rect;
+    var line: u32;
+    var spacing = 1.0;
+    if (all(c >= rect.xy) && all(c < rect.xy + rect.zw)) {
+        let local = c - rect.xy;
+        line = this_bundle.wide_lines + local.y * rect.z + local.x;
+    } else {
+        let k = this_bundle.wide;
+        line = (c.y / k) * (this_bundle.resolution / k) + c.x / k;
+        spacing = f32(k);
+    }
     // The line's sorted surfaces: its bucket, or past LINE_BUCKET its own slice
     // (bundle_transfer).
     let count = counts[line];
@@ -634,7 +648,7 @@ fn line_at(cell: vec2<i32>) -> OnLine {
         begin = slice.x;
         end = slice.y;
     }
-    return OnLine(begin, end, begin, false);
+    return OnLine(begin, end, begin, false, spacing);
 }
 
 // x's line with `lo` at its start (`on_line` searches it).
@@ -672,7 +686,7 @@ fn search(line_in: OnLine, x: vec3<f32>, s: f32) -> OnLine {
     let depth = dot(x - this_bundle.centre.xyz, this_bundle.direction.xyz);
     // The line's fragments lie at depths taken at its centre, up to a pixel's half diagonal
     // from x's ray: a surface within `slack` of x along the line may still be ahead of it.
-    let slack = 0.75 * sqrt(this_bundle.direction.w);
+    let slack = 0.75 * sqrt(this_bundle.direction.w) * line.spacing;
     let start_depth = depth - s * slack;
     // First fragment at or past start_depth in the direction of travel (binary search over
     // the sorted line). A line within its bucket (LINE_BUCKET = 8 places, nearly every line)
@@ -1005,10 +1019,14 @@ fn edge_received(at: Seen, toward: vec3<f32>, s: f32, lo: u32) -> Received {
     // receives there, as `gather` does on x's own line (a point of j at most a line and a
     // half from x). Only where none does (j crossed by no line near x: a patch smaller
     // than a line), the candidates on x's own line decide (`nearest_received`).
+    // In x's own line's width: a wide line's neighbours are a wide line away.
     let cell = cell_of(at.x);
     let base = vec2<i32>(floor(cell));
-    let f = cell - floor(cell);
-    let side = vec2<i32>(select(-1, 1, f.x >= 0.5), select(-1, 1, f.y >= 0.5));
+    let width = line_at(base).spacing;
+    let scaled = cell / width;
+    let f = scaled - floor(scaled);
+    let step = i32(width);
+    let side = vec2<i32>(select(-step, step, f.x >= 0.5), select(-step, step, f.y >= 0.5));
     var first = vec2<i32>(side.x, 0);
     var second = vec2<i32>(0, side.y);
     if (abs(f.y - 0.5) > abs(f.x - 0.5)) {

@@ -85,6 +85,10 @@ struct Args {
     /// Override the scenes' bundle resolution (throughput and convergence).
     #[arg(long, value_name = "R")]
     bundle_resolution: Option<u32>,
+    /// Wide lines outside the glossy patches' window, as `firstshot --wide-lines` (1: one
+    /// level; default: the automatic choice).
+    #[arg(long, value_name = "N")]
+    wide_lines: Option<u32>,
     /// Render every camera of each scene (`[camera]` and its `[[cameras]]`) in each step, as
     /// `firstshot --all-cameras` does (throughput: the stage profile then shows each view's
     /// image stages).
@@ -163,6 +167,7 @@ pub struct Config {
     pub repeats: usize,
     pub steps: u32,
     pub bundle_resolution: Option<u32>,
+    pub wide_lines: Option<u32>,
     pub all_cameras: bool,
     pub first_shot: bool,
     pub long_steps: u32,
@@ -192,6 +197,9 @@ impl Config {
         }
         if let Some(r) = self.bundle_resolution {
             o.bundle_resolution = Some(r);
+        }
+        if self.wide_lines.is_some() {
+            o.wide_lines = self.wide_lines;
         }
         o.first_shot = self.first_shot;
         if self.all_cameras {
@@ -462,6 +470,7 @@ fn main() -> ExitCode {
         repeats: args.repeats.unwrap_or(if quick { 1 } else { 5 }).max(1),
         steps: args.steps.unwrap_or(if quick { 8 } else { 40 }).max(1),
         bundle_resolution: args.bundle_resolution,
+        wide_lines: args.wide_lines,
         all_cameras: args.all_cameras,
         first_shot: !args.no_first_shot,
         long_steps: args.long_steps.unwrap_or(if quick { 64 } else { 2000 }).max(1),

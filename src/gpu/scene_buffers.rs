@@ -443,6 +443,11 @@ pub struct RasterMesh {
     /// Whether `draw_in_view` skips the chunks outside the view (the default); tests turn it
     /// off to check that the item buffers do not change.
     pub cull: bool,
+    /// The first patch of each triangle (`set_fine_patches`).
+    triangle_patches: Vec<u32>,
+    /// The runs of triangles `draw_wide` draws: all of them unless `set_fine_patches` left
+    /// some out.
+    wide_runs: Vec<std::ops::Range<u32>>,
 }
 
 impl RasterMesh {
@@ -454,6 +459,37 @@ impl RasterMesh {
             triangles: triangles.triangle_count(),
             chunks: ChunkBoxes::of(&triangles.vertices),
             cull: true,
+            triangle_patches: triangles.vertices.iter().step_by(3).map(|v| v.patch & !VERTEX_TWIN_BIT).collect(),
+            wide_runs: std::iter::once(0..triangles.triangle_count()).collect(),
+        }
+    }
+
+    /// Leaves the triangles of the patches `fine` says are fine out of `draw_wide`: a
+    /// bundle's wide lines never meet them (`iteration::FineWindow`). Where they are
+    /// scattered among the others in more than `MAX_WIDE_RUNS` runs, every triangle stays
+    /// (the wide lines' draw leaves the fine window's fragments anyway).
+    pub fn set_fine_patches(&mut self, fine: impl Fn(u32) -> bool) {
+        const MAX_WIDE_RUNS: usize = 64;
+        let mut runs: Vec<std::ops::Range<u32>> = Vec::new();
+        for (t, &patch) in self.triangle_patches.iter().enumerate() {
+            if fine(patch) {
+                continue;
+            }
+            let t = t as u32;
+            match runs.last_mut() {
+                Some(run) if run.end == t => run.end = t + 1,
+                _ => runs.push(t..t + 1),
+            }
+        }
+        self.wide_runs = if runs.len() <= MAX_WIDE_RUNS { runs } else { std::iter::once(0..self.triangles).collect() };
+    }
+
+    /// Draws the triangles a bundle's wide lines can meet (`set_fine_patches`).
+    pub fn draw_wide(&self, pass: &mut wgpu::RenderPass<'_>, instances: std::ops::Range<u32>) {
+        pass.set_vertex_buffer(0, self.vertices.slice(..));
+        pass.set_vertex_buffer(1, self.lattice.slice(..));
+        for run in &self.wide_runs {
+            pass.draw(run.start * 3..run.end * 3, instances.clone());
         }
     }
 

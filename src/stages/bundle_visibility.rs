@@ -3,6 +3,7 @@
 
 use crate::gpu::bindings::{Kernel, KernelSpec, Resource, fragment, read, read_write, uniform, vertex};
 use crate::gpu::scene_buffers::{OUTGOING, RasterMesh};
+use crate::iteration::Grid;
 use crate::layout::GpuBundle;
 use crate::stages::camera_item_buffer::raster_vertex_layouts;
 
@@ -39,13 +40,16 @@ pub struct BundleVisibility {
     fill: wgpu::RenderPipeline,
     bind_group: wgpu::BindGroup,
     depth_view: wgpu::TextureView,
+    grid: Grid,
 }
 
 impl BundleVisibility {
     /// `buffers`: bundle, counts, heads, fragments, spill, tally, overflow, long_lines,
-    /// outgoing (`SPEC`'s group 0). `like`: a stage over arrays of the same paging whose
-    /// pipeline this one shares (its depth attachment follows `resolution`).
-    pub fn new(device: &wgpu::Device, buffers: [Resource; 9], resolution: u32, like: Option<&Self>) -> Self {
+    /// outgoing (`SPEC`'s group 0). `grid`: the bundles' grid. `like`: a stage over arrays of
+    /// the same paging whose pipeline this one shares (its depth attachment follows the
+    /// resolution).
+    pub fn new(device: &wgpu::Device, buffers: [Resource; 9], grid: Grid, like: Option<&Self>) -> Self {
+        let resolution = grid.resolution;
         let built = match like {
             Some(like) => like.kernel.clone(),
             None => SPEC.build_paged(device, crate::gpu::bindings::paging(&buffers)),
@@ -95,10 +99,13 @@ impl BundleVisibility {
             bind_group: built.resource_bind_group(device, 0, &buffers),
             depth_view: depth.create_view(&Default::default()),
             kernel: built,
+            grid,
         }
     }
 
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh) {
+    /// `fine_rect`: the bundle's fine window (`GpuBundle::fine_rect`), the whole grid with one
+    /// level.
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh, fine_rect: [u32; 4]) {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("firstshot.bundle_visibility.fill"),
             color_attachments: &[],
@@ -113,6 +120,19 @@ impl BundleVisibility {
         });
         pass.set_pipeline(&self.fill);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        raster.draw(&mut pass, 0..1);
+        // Two levels: the wide lines (instance 0) over the whole grid, of the triangles
+        // outside the fine patches (those can only fall in the fine window, which the wide
+        // lines leave to the fine ones); then the fine lines (instance 1) of every triangle,
+        // in the window alone.
+        if let Some(window) = self.grid.window {
+            let wide = (self.grid.resolution / window.wide) as f32;
+            pass.set_viewport(0.0, 0.0, wide, wide, 0.0, 1.0);
+            raster.draw_wide(&mut pass, 0..1);
+            let r = self.grid.resolution as f32;
+            pass.set_viewport(0.0, 0.0, r, r, 0.0, 1.0);
+            let [x, y, w, h] = fine_rect;
+            pass.set_scissor_rect(x, y, w, h);
+        }
+        raster.draw(&mut pass, 1..2);
     }
 }

@@ -21,6 +21,22 @@ pub fn mean_and_spread(values: &[f64]) -> (f64, f64) {
     (mean, spread)
 }
 
+/// Form factor from a differential area at `x` with normal `n` to a polygon (Lambert's
+/// contour formula), the tests' own oracle.
+pub fn point_to_polygon(x: DVec3, n: DVec3, polygon: &[DVec3]) -> f64 {
+    let mut sum = 0.0;
+    for i in 0..polygon.len() {
+        let a = (polygon[i] - x).normalize();
+        let b = (polygon[(i + 1) % polygon.len()] - x).normalize();
+        let angle = a.dot(b).clamp(-1.0, 1.0).acos();
+        let c = a.cross(b);
+        if c.length() > 0.0 {
+            sum += angle * n.dot(c.normalize());
+        }
+    }
+    (sum / (2.0 * std::f64::consts::PI)).abs()
+}
+
 /// max-Phong as SCENE_FORMAT.md writes it (one channel), the tests' own reading,
 /// written apart from `scene::brdf`.
 pub fn max_phong(kd: f64, ks: f64, shininess: f64, n: DVec3, w_in: DVec3, w_out: DVec3) -> f64 {

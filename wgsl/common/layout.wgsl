@@ -176,6 +176,11 @@ struct Bundle {
     pixel_class: u32,     // the gather's pixels: one of each stride x stride block
     pixel_stride: u32,    // 1, or 2 with four interleaved bundles a step
     pixel_shuffle: u32,   // the step's shuffle of the classes within the blocks
+    fine_rect: vec4<u32>, // the fine window: x0, y0, width, height in fine lines
+    wide: u32,            // fine lines along a wide line's edge (1: one level)
+    line_capacity: u32,   // lines the buffers hold
+    wide_lines: u32,      // wide lines, numbered first (0 with one level)
+    line_count: u32,      // wide_lines + the fine window's lines
 }
 
 // Which way patch j looks along a bundle: +1 if its front faces +d, else -1 (s_j).
