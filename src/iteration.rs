@@ -614,7 +614,7 @@ impl Iteration {
         Self::with_arrays(ctx, scene, arrays, grid, capacity, image_first_bounce_per_point, None)
     }
 
-    /// An iteration at `resolution` with room for `capacity` fragments that shares this
+    /// An iteration over `grid` with room for `capacity` fragments that shares this
     /// one's per-patch arrays and its pipelines (only the line buffers and bind groups are
     /// new: building the pipelines again took about 45 ms on lavapipe): the coarse burn-in
     /// (`coarse_burn_in`), or this resolution with a larger fragment list after an overflow.
