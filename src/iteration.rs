@@ -154,20 +154,28 @@ pub const WIDE_LINES_CHOICES: [u32; 3] = [1, 2, 4];
 
 /// The wide lines' width where it is not asked for (`--wide-lines auto`): the widest of 4
 /// and 2 fine lines that keeps a wide line at most twice as wide as the image's need asks of
-/// a line (`BundleNeeds::image`), where the glossy patches set the resolution (their need
-/// above the image's) and a step draws one bundle; else 1 (one level). The image's need is
-/// where the gather's blur at contacts stays small (docs/ALGORITHM.md 6, "Bundle
-/// resolution"), and twice it is a judgement: on the Sierpinski scene at 256 x 256 wide
-/// lines of 1.1 and 2.2 times its width left the error after 60 and 300 steps as it was,
-/// but the Cornell boxes' uniform grids at twice their rule's width had 20-30 % more error
-/// after 1000 steps, at their contacts (docs/PERFORMANCE.md, "Two levels of lines").
+/// a line (`BundleNeeds::image`) and crossing the median reflecting patch that is not glossy
+/// at least once a step (`BundleNeeds::diffuse`), where the glossy patches set the resolution
+/// (their need above the image's) and a step draws one bundle; else 1 (one level).
+///
+/// The image's need is where the gather's blur at contacts stays small (docs/ALGORITHM.md 6,
+/// "Bundle resolution"), and twice it is a judgement: on the Sierpinski scene at 256 x 256
+/// wide lines of 1.1 and 2.2 times its width left the error after 60 and 300 steps as it
+/// was, but the Cornell boxes' uniform grids at twice their rule's width had 20-30 % more
+/// error after 1000 steps, at their contacts (docs/PERFORMANCE.md, "Two levels of lines").
+/// The diffuse patches' need keeps their J from spiking: the sun room at 64 x 48 (bundle 128,
+/// a tiny image need) with wide lines of 4, 32 across the scene, had image means 2.1-2.5
+/// times Mitsuba's on two seeds of eight, from the few patches such a line crossed.
 pub fn auto_wide_lines(needs: &BundleNeeds, resolution: u32, per_step: u32) -> u32 {
     if per_step != 1 || needs.patches <= needs.image {
         return 1;
     }
     [4, 2]
         .into_iter()
-        .find(|&k| resolution.is_multiple_of(k) && 2.0 * (resolution / k) as f64 >= needs.image)
+        .find(|&k| {
+            let wide = (resolution / k) as f64;
+            resolution.is_multiple_of(k) && 2.0 * wide >= needs.image && wide >= needs.diffuse
+        })
         .unwrap_or(1)
 }
 
@@ -370,6 +378,9 @@ pub fn is_glossy(p: &crate::scene::Patch, materials: &[crate::scene::Material]) 
 pub struct BundleNeeds {
     pub patches: f64,
     pub image: f64,
+    /// What the patches' rule would give the reflecting patches that are not glossy: the
+    /// resolution that crosses their median one with one line a step (`auto_wide_lines`).
+    pub diffuse: f64,
     pub patch_count: usize,
     pub view_pixels: u64,
 }
@@ -428,6 +439,10 @@ impl BundleNeeds {
         let mut glossy_areas: Vec<f64> = sampled.clone().filter(|p| is_glossy(p, materials)).map(|p| p.area).collect();
         let glossy_need =
             crate::scene::tessellate::median(&mut glossy_areas).map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
+        let mut diffuse_areas: Vec<f64> =
+            sampled.clone().filter(|p| p.material.is_some() && !is_glossy(p, materials)).map(|p| p.area).collect();
+        let diffuse =
+            crate::scene::tessellate::median(&mut diffuse_areas).map_or(0.0, |a| 2.0 * radius * (2.0 / a).sqrt());
         // The glossy patches' share of what the views see (solid angle, occlusion ignored).
         let (mut seen_all, mut seen_glossy) = (0.0f64, 0.0f64);
         let mut wanted: f64 = 0.0;
@@ -480,7 +495,7 @@ impl BundleNeeds {
             glossy_areas.len() as f64 / sampled.clone().count().max(1) as f64
         };
         let by_patches = if share >= GLOSSY_SHARE { glossy_need } else { 0.0 };
-        BundleNeeds { patches: by_patches, image: wanted, patch_count: patches.patches.len(), view_pixels }
+        BundleNeeds { patches: by_patches, image: wanted, diffuse, patch_count: patches.patches.len(), view_pixels }
     }
 }
 
@@ -845,8 +860,13 @@ mod tests {
 
     #[test]
     fn wide_lines_where_the_glossy_patches_set_the_grid() {
-        let needs =
-            |patches: f64, image: f64| BundleNeeds { patches, image, patch_count: 22_420, view_pixels: 256 * 256 };
+        let needs = |patches: f64, image: f64| BundleNeeds {
+            patches,
+            image,
+            diffuse: 80.0,
+            patch_count: 22_420,
+            view_pixels: 256 * 256,
+        };
         // The Sierpinski scene at 256 x 256: 176 lines would be 2.2 times the image's width.
         assert_eq!(auto_wide_lines(&needs(645.0, 384.0), 704, 1), 2);
         assert_eq!(auto_wide_lines(&needs(645.0, 350.0), 704, 1), 4, "176 >= 350 / 2");
@@ -855,6 +875,10 @@ mod tests {
         assert_eq!(auto_wide_lines(&needs(645.0, 0.0), 704, 1), 4, "no view");
         assert_eq!(auto_wide_lines(&needs(1024.0, 900.0), 1024, 1), 2);
         assert_eq!(auto_wide_lines(&needs(1200.0, 1100.0), 1024, 1), 1, "512 < 1100 / 2");
+        let fine_walls = BundleNeeds { diffuse: 200.0, ..needs(645.0, 300.0) };
+        assert_eq!(auto_wide_lines(&fine_walls, 704, 1), 2, "176 would cross the walls' median patch < once a step");
+        let sun_room = BundleNeeds { diffuse: 300.0, ..needs(128.0, 40.0) };
+        assert_eq!(auto_wide_lines(&sun_room, 128, 1), 1, "the sun room at 64 x 48");
     }
 
     #[test]
@@ -862,6 +886,7 @@ mod tests {
         let needs = |patches: f64, image: f64, patch_count: usize| BundleNeeds {
             patches,
             image,
+            diffuse: 0.0,
             patch_count,
             view_pixels: 256 * 256,
         };

@@ -60,7 +60,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     // as a large patch's. Lbar_j is only the control variates' coefficient, so any weight
     // keeps them unbiased; a spiked Lbar_j gave the image's first steps pixels of +-50 where
     // the radiance is 0.2 (a Cornell box sliver at bundle 64).
-    let weight = MEAN_RADIANCE_WEIGHT * min(1.0, 1.0 / factor);
+    // A patch that is not glossy may lie outside the fine window, where a wide line weighs
+    // wide^2 fine lines (bundle_transfer): its spikes are that much taller.
+    let material = patches_at(j).material;
+    let glossy = materials[material].kind == MATERIAL_PHONG && any(materials[material].specular.rgb > vec3<f32>(0.0));
+    let line_factor = select(factor * f32(bundle.wide * bundle.wide), factor, glossy);
+    let weight = MEAN_RADIANCE_WEIGHT * min(1.0, 1.0 / line_factor);
     var mean_radiance = mix(old_mean_radiance, 2.0 * diffuse, weight);
     // An image whose directions are its own stratified set (rng::image_direction) keeps
     // Lbar_j as the burn-in left it: a direction of the set avoids the strata the set's
