@@ -94,73 +94,18 @@ fn test05_bright_furnace_converges_with_bounded_variance() {
 fn test02_received_radiance_matches_the_form_factor() {
     let Some(ctx) = gpu() else { return };
     // An emitting square (radiance 1, black) and, facing it, one receiving triangle of
-    // albedo 1: every pixel showing the triangle converges to F(triangle -> square).
-    let h = 0.4;
-    let square = [
-        DVec3::new(-1.0, -1.0, 0.0),
-        DVec3::new(1.0, -1.0, 0.0),
-        DVec3::new(1.0, 1.0, 0.0),
-        DVec3::new(-1.0, 1.0, 0.0),
-    ];
-    let receiver = [DVec3::new(-0.3, -0.2, h), DVec3::new(0.1, 0.35, h), DVec3::new(0.35, -0.25, h)];
-    let mut scene = bare_scene();
-    scene.camera.position = DVec3::new(0.02, 0.01, h / 2.0);
-    scene.camera.look_at = DVec3::new(0.02, 0.01, h);
-    scene.camera.fov_y = 60.0;
-    scene.camera.width = 16;
-    scene.camera.height = 16;
-    scene.materials = vec![
-        Material { name: "black".into(), kind: MaterialKind::Diffuse { albedo: [0.0; 3] } },
-        Material { name: "white".into(), kind: MaterialKind::Diffuse { albedo: [1.0; 3] } },
-    ];
-    let facing = |t: [DVec3; 3], towards: DVec3| {
-        if (t[1] - t[0]).cross(t[2] - t[0]).dot(towards) > 0.0 { t } else { [t[0], t[2], t[1]] }
-    };
-    let mut patches = patches_of(
-        &[
-            facing([square[0], square[1], square[2]], DVec3::Z),
-            facing([square[0], square[2], square[3]], DVec3::Z),
-            facing(receiver, -DVec3::Z),
-        ],
-        vec![],
-    );
-    for p in &mut patches.patches[..2] {
-        p.material = Some(0);
-        p.emission = [1.0; 3];
-    }
-    patches.patches[2].material = Some(1);
-    // Oracle: the point-to-square form factor averaged over what the centre pixels below
-    // see, each pixel at 8 x 8 points spread over it (its camera samples are uniform in the
-    // pixel), where their camera rays meet the plane z = h. (The receiver's mean form
-    // factor, 0.8784, is 0.7 % below the centre's 0.8845: a stratified run's noise, 0.0012,
-    // is small enough to tell them apart.)
-    let points: Vec<DVec3> = (6..10)
-        .flat_map(|y| (6..10).flat_map(move |x| ray_caster::pixel_grid(x, y, 8)))
-        .map(|(px, py)| {
-            let (o, d) = ray_caster::camera_ray(&scene.camera, 16, 16, px, py);
-            o + d * ((h - o.z) / d.z)
-        })
-        .collect();
-    // Inside the receiver: on the same side of each of its edges (in its plane z = h).
-    let inside = |p: DVec3| {
-        let side = |a: DVec3, b: DVec3| (b - a).truncate().perp_dot((p - a).truncate());
-        let s = [side(receiver[0], receiver[1]), side(receiver[1], receiver[2]), side(receiver[2], receiver[0])];
-        (p.z - h).abs() < 1e-9 && (s.iter().all(|&v| v > 0.0) || s.iter().all(|&v| v < 0.0))
-    };
-    assert!(points.iter().all(|&p| inside(p)), "the centre pixels see the receiver");
-    let form_factor =
-        points.iter().map(|&p| point_to_polygon(p, -DVec3::Z, &square)).sum::<f64>() / points.len() as f64;
+    // albedo 1: every pixel showing the triangle converges to F(triangle -> square). (The
+    // receiver's mean form factor, 0.8784, is 0.7 % below the centre's 0.8845: a stratified
+    // run's noise, 0.0012, is small enough to tell them apart.)
+    let FormFactorScene { scene, patches, form_factor } = form_factor_scene(&[]);
     // Noise measured, not assumed: independent runs with different seeds, their standard
     // error of the mean.
     let runs: Vec<f64> = (0..8)
         .map(|seed| {
             let mut o = options(&scene, 250, 100 + seed);
             o.bundle_resolution = Some(48);
-            let image = render(&ctx, &scene, &patches, &o).unwrap().image;
             // The centre pixels see the receiver (the camera looks at it from 0.2 away).
-            let centre: Vec<f64> =
-                (6..10).flat_map(|y| (6..10).map(move |x| (x, y))).map(|(x, y)| image.at(x, y)[0] as f64).collect();
-            centre.iter().sum::<f64>() / centre.len() as f64
+            centre_mean(&render(&ctx, &scene, &patches, &o).unwrap().image)
         })
         .collect();
     let mean = runs.iter().sum::<f64>() / runs.len() as f64;

@@ -126,58 +126,12 @@ fn test03_the_gather_through_wide_lines_matches_the_form_factor() {
     // a small glossy triangle far to the side, so that the bundles have a fine window there
     // and the receiver gathers through wide lines (of 2 fine lines) in most of them.
     let Some(ctx) = gpu() else { return };
-    let h = 0.4;
-    let square = [
-        DVec3::new(-1.0, -1.0, 0.0),
-        DVec3::new(1.0, -1.0, 0.0),
-        DVec3::new(1.0, 1.0, 0.0),
-        DVec3::new(-1.0, 1.0, 0.0),
-    ];
-    let receiver = [DVec3::new(-0.3, -0.2, h), DVec3::new(0.1, 0.35, h), DVec3::new(0.35, -0.25, h)];
-    let glossy = [DVec3::new(2.4, 0.0, 0.3), DVec3::new(2.5, 0.1, 0.3), DVec3::new(2.5, 0.0, 0.2)];
-    let mut scene = bare_scene();
-    scene.camera.position = DVec3::new(0.02, 0.01, h / 2.0);
-    scene.camera.look_at = DVec3::new(0.02, 0.01, h);
-    scene.camera.fov_y = 60.0;
-    scene.camera.width = 16;
-    scene.camera.height = 16;
-    scene.materials = vec![
-        Material { name: "black".into(), kind: MaterialKind::Diffuse { albedo: [0.0; 3] } },
-        Material { name: "white".into(), kind: MaterialKind::Diffuse { albedo: [1.0; 3] } },
-        Material {
-            name: "glossy".into(),
-            kind: MaterialKind::Phong { diffuse: [0.0; 3], specular: [0.0001; 3], shininess: 10.0 },
-        },
-    ];
-    let facing = |t: [DVec3; 3], towards: DVec3| {
-        if (t[1] - t[0]).cross(t[2] - t[0]).dot(towards) > 0.0 { t } else { [t[0], t[2], t[1]] }
+    let glossy = Material {
+        name: "glossy".into(),
+        kind: MaterialKind::Phong { diffuse: [0.0; 3], specular: [0.0001; 3], shininess: 10.0 },
     };
-    let mut patches = patches_of(
-        &[
-            facing([square[0], square[1], square[2]], DVec3::Z),
-            facing([square[0], square[2], square[3]], DVec3::Z),
-            facing(receiver, -DVec3::Z),
-            glossy,
-        ],
-        vec![],
-    );
-    for p in &mut patches.patches[..2] {
-        p.material = Some(0);
-        p.emission = [1.0; 3];
-    }
-    patches.patches[2].material = Some(1);
-    patches.patches[3].material = Some(2);
-    // The oracle of tests/iteration.rs test02: the point-to-square form factor averaged over
-    // 8 x 8 points of each centre pixel, where their camera rays meet the receiver's plane.
-    let points: Vec<DVec3> = (6..10)
-        .flat_map(|y| (6..10).flat_map(move |x| ray_caster::pixel_grid(x, y, 8)))
-        .map(|(px, py)| {
-            let (o, d) = ray_caster::camera_ray(&scene.camera, 16, 16, px, py);
-            o + d * ((h - o.z) / d.z)
-        })
-        .collect();
-    let form_factor =
-        points.iter().map(|&p| point_to_polygon(p, -DVec3::Z, &square)).sum::<f64>() / points.len() as f64;
+    let far = [DVec3::new(2.4, 0.0, 0.3), DVec3::new(2.5, 0.1, 0.3), DVec3::new(2.5, 0.0, 0.2)];
+    let FormFactorScene { scene, patches, form_factor } = form_factor_scene(&[(far, glossy)]);
     let runs: Vec<f64> = (0..8)
         .map(|seed| {
             let mut o = RenderOptions::from_scene(&scene);
@@ -185,10 +139,7 @@ fn test03_the_gather_through_wide_lines_matches_the_form_factor() {
             (o.bundle_resolution, o.bundles_per_step, o.wide_lines) = (Some(64), Some(1), Some(2));
             let result = render(&ctx, &scene, &patches, &o).unwrap();
             assert_eq!(result.stats.wide_lines, 2, "the run had two levels");
-            let image = result.image;
-            let centre: Vec<f64> =
-                (6..10).flat_map(|y| (6..10).map(move |x| (x, y))).map(|(x, y)| image.at(x, y)[0] as f64).collect();
-            centre.iter().sum::<f64>() / centre.len() as f64
+            centre_mean(&result.image)
         })
         .collect();
     let (mean, spread) = mean_and_spread(&runs);

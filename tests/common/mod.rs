@@ -247,3 +247,81 @@ pub fn render_direct(scene: &firstshot::scene::Scene, passes: u32) -> Option<fir
     let patches = firstshot::scene::tessellate(scene, options.patch_size).unwrap();
     Some(firstshot::render::render(&ctx, scene, &patches, &options).unwrap().image)
 }
+
+/// The form-factor scene of tests/iteration.rs test02: an emitting square (radiance 1, black)
+/// in z = 0 and, facing it at z = 0.4, one white receiving triangle (albedo 1), seen from
+/// halfway by a 16 x 16 camera whose centre 4 x 4 pixels show the receiver alone; and the
+/// oracle they converge to, the point-to-square form factor averaged over 8 x 8 points of
+/// each of those pixels (their camera samples are uniform in the pixel), where their camera
+/// rays meet the receiver's plane. `extra`: more triangles, each with its material, which
+/// the scene's materials get after black and white.
+pub struct FormFactorScene {
+    pub scene: firstshot::scene::Scene,
+    pub patches: Patches,
+    pub form_factor: f64,
+}
+
+pub fn form_factor_scene(extra: &[([DVec3; 3], firstshot::scene::Material)]) -> FormFactorScene {
+    use firstshot::scene::{Material, MaterialKind};
+    let h = 0.4;
+    let square = [
+        DVec3::new(-1.0, -1.0, 0.0),
+        DVec3::new(1.0, -1.0, 0.0),
+        DVec3::new(1.0, 1.0, 0.0),
+        DVec3::new(-1.0, 1.0, 0.0),
+    ];
+    let receiver = [DVec3::new(-0.3, -0.2, h), DVec3::new(0.1, 0.35, h), DVec3::new(0.35, -0.25, h)];
+    let mut scene = bare_scene();
+    scene.camera.position = DVec3::new(0.02, 0.01, h / 2.0);
+    scene.camera.look_at = DVec3::new(0.02, 0.01, h);
+    scene.camera.fov_y = 60.0;
+    scene.camera.width = 16;
+    scene.camera.height = 16;
+    scene.materials = vec![
+        Material { name: "black".into(), kind: MaterialKind::Diffuse { albedo: [0.0; 3] } },
+        Material { name: "white".into(), kind: MaterialKind::Diffuse { albedo: [1.0; 3] } },
+    ];
+    scene.materials.extend(extra.iter().map(|(_, m)| m.clone()));
+    let facing = |t: [DVec3; 3], towards: DVec3| {
+        if (t[1] - t[0]).cross(t[2] - t[0]).dot(towards) > 0.0 { t } else { [t[0], t[2], t[1]] }
+    };
+    let mut triangles = vec![
+        facing([square[0], square[1], square[2]], DVec3::Z),
+        facing([square[0], square[2], square[3]], DVec3::Z),
+        facing(receiver, -DVec3::Z),
+    ];
+    triangles.extend(extra.iter().map(|(t, _)| *t));
+    let mut patches = patches_of(&triangles, vec![]);
+    for p in &mut patches.patches[..2] {
+        p.material = Some(0);
+        p.emission = [1.0; 3];
+    }
+    for (i, p) in patches.patches[2..].iter_mut().enumerate() {
+        p.material = Some(1 + i as u32);
+    }
+    let points: Vec<DVec3> = (6..10)
+        .flat_map(|y| (6..10).flat_map(move |x| ray_caster::pixel_grid(x, y, 8)))
+        .map(|(px, py)| {
+            let (o, d) = ray_caster::camera_ray(&scene.camera, 16, 16, px, py);
+            o + d * ((h - o.z) / d.z)
+        })
+        .collect();
+    // Inside the receiver: on the same side of each of its edges (in its plane z = h).
+    let inside = |p: DVec3| {
+        let side = |a: DVec3, b: DVec3| (b - a).truncate().perp_dot((p - a).truncate());
+        let s = [side(receiver[0], receiver[1]), side(receiver[1], receiver[2]), side(receiver[2], receiver[0])];
+        (p.z - h).abs() < 1e-9 && (s.iter().all(|&v| v > 0.0) || s.iter().all(|&v| v < 0.0))
+    };
+    assert!(points.iter().all(|&p| inside(p)), "the centre pixels see the receiver");
+    let form_factor =
+        points.iter().map(|&p| point_to_polygon(p, -DVec3::Z, &square)).sum::<f64>() / points.len() as f64;
+    FormFactorScene { scene, patches, form_factor }
+}
+
+/// The mean of the first channel over the centre 4 x 4 pixels of a 16 x 16 image (what
+/// `form_factor_scene`'s oracle is for).
+pub fn centre_mean(image: &firstshot::image::Image) -> f64 {
+    let centre: Vec<f64> =
+        (6..10).flat_map(|y| (6..10).map(move |x| (x, y))).map(|(x, y)| image.at(x, y)[0] as f64).collect();
+    centre.iter().sum::<f64>() / centre.len() as f64
+}
