@@ -148,7 +148,7 @@ fn test03_no_first_shot_with_a_point_light_is_a_usage_error() {
 }
 
 /// The stats keys of CLI.md.
-const STATS_KEYS: [&str; 16] = [
+const STATS_KEYS: [&str; 18] = [
     "adapter",
     "patches",
     "memory",
@@ -157,6 +157,8 @@ const STATS_KEYS: [&str; 16] = [
     "hemicube_resolution",
     "bundle_resolution",
     "bundles_per_step",
+    "wide_lines",
+    "bundle_lines",
     "gather",
     "first_shot",
     "first_shot_ms",
