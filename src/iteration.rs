@@ -154,27 +154,31 @@ pub const WIDE_LINES_CHOICES: [u32; 3] = [1, 2, 4];
 
 /// The wide lines' width where it is not asked for (`--wide-lines auto`): the widest of 4
 /// and 2 fine lines that keeps a wide line at most twice as wide as the image's need asks of
-/// a line (`BundleNeeds::image`) and crossing the median reflecting patch that is not glossy
-/// at least once a step (`BundleNeeds::diffuse`), where the glossy patches set the resolution
-/// (their need above the image's) and a step draws one bundle; else 1 (one level).
+/// a bundle's line (`BundleNeeds::image`, halved for four bundles a step, as the automatic
+/// resolution is) and crossing the median reflecting patch that is not glossy at least once
+/// a step (`BundleNeeds::diffuse`), where glossy patches ask for lines (`BundleNeeds::patches`);
+/// else 1 (one level). `fine_window` then keeps one level where the window would not save
+/// half the lines.
 ///
 /// The image's need is where the gather's blur at contacts stays small (docs/ALGORITHM.md 6,
 /// "Bundle resolution"), and twice it is a judgement: on the Sierpinski scene at 256 x 256
 /// wide lines of 1.1 and 2.2 times its width left the error after 60 and 300 steps as it
-/// was, but the Cornell boxes' uniform grids at twice their rule's width had 20-30 % more
-/// error after 1000 steps, at their contacts (docs/PERFORMANCE.md, "Two levels of lines").
+/// was, and at 512 x 512 (four bundles of 416) wide lines of 1.1 times it after 40 steps,
+/// but the Cornell boxes' uniform grids at twice their rule's width had 20-30 % more error
+/// after 1000 steps, at their contacts (docs/PERFORMANCE.md, "Two levels of lines").
 /// The diffuse patches' need keeps their J from spiking: the sun room at 64 x 48 (bundle 128,
 /// a tiny image need) with wide lines of 4, 32 across the scene, had image means 2.1-2.5
 /// times Mitsuba's on two seeds of eight, from the few patches such a line crossed.
 pub fn auto_wide_lines(needs: &BundleNeeds, resolution: u32, per_step: u32) -> u32 {
-    if per_step != 1 || needs.patches <= needs.image {
+    if needs.patches <= 0.0 {
         return 1;
     }
+    let image = needs.image / pixel_stride(per_step) as f64;
     [4, 2]
         .into_iter()
         .find(|&k| {
             let wide = (resolution / k) as f64;
-            resolution.is_multiple_of(k) && 2.0 * wide >= needs.image && wide >= needs.diffuse
+            resolution.is_multiple_of(k) && 2.0 * wide >= image && wide >= needs.diffuse
         })
         .unwrap_or(1)
 }
@@ -870,8 +874,10 @@ mod tests {
         // The Sierpinski scene at 256 x 256: 176 lines would be 2.2 times the image's width.
         assert_eq!(auto_wide_lines(&needs(645.0, 384.0), 704, 1), 2);
         assert_eq!(auto_wide_lines(&needs(645.0, 350.0), 704, 1), 4, "176 >= 350 / 2");
-        assert_eq!(auto_wide_lines(&needs(645.0, 384.0), 704, 4), 1, "four bundles a step");
-        assert_eq!(auto_wide_lines(&needs(300.0, 384.0), 384, 1), 1, "the image sets the grid");
+        // At 512 x 512: four bundles of 416, each serving a quarter of the pixels.
+        assert_eq!(auto_wide_lines(&needs(645.0, 768.0), 416, 4), 2, "four bundles a step");
+        assert_eq!(auto_wide_lines(&needs(300.0, 400.0), 384, 1), 1, "the image sets the grid: 192 < 400 / 2");
+        assert_eq!(auto_wide_lines(&needs(0.0, 384.0), 704, 1), 1, "no glossy patch asks for lines");
         assert_eq!(auto_wide_lines(&needs(645.0, 0.0), 704, 1), 4, "no view");
         assert_eq!(auto_wide_lines(&needs(1024.0, 900.0), 1024, 1), 2);
         assert_eq!(auto_wide_lines(&needs(1200.0, 1100.0), 1024, 1), 1, "512 < 1100 / 2");

@@ -137,10 +137,10 @@ pub(crate) struct RenderArgs {
     bundles_per_step: Option<BundlesPerStep>,
     /// Lines of two widths in each bundle: fine lines (the --bundle-resolution) only in a
     /// window around the projection of the glossy patches, and outside it lines N fine lines
-    /// wide: 1 (one level), 2, 4, or "auto" (the default: the widest that is at most twice
-    /// the line width the image asks for and crosses the median patch that is not glossy
-    /// once a step, where the glossy patches set the bundle resolution and a step draws one
-    /// bundle, else 1; docs/ALGORITHM.md 6, "Two levels of lines")
+    /// wide: 1 (one level), 2, 4, or "auto" (the default: where glossy patches ask for lines,
+    /// the widest that is at most twice the line width the image asks of a bundle and
+    /// crosses the median patch that is not glossy once a step, else 1; docs/ALGORITHM.md 6,
+    /// "Two levels of lines")
     #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = parse_wide_lines)]
     wide_lines: Option<WideLines>,
     /// Take each surface's first reflection of the lights, as the image gathers it from that
