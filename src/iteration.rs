@@ -586,8 +586,7 @@ pub struct Iteration {
     transfer: BundleTransfer,
     finalize: BundleFinalize,
     pub capacity: u32,
-    pub resolution: u32,
-    /// The grid's levels (`Grid`).
+    /// The bundles' grid: its resolution and levels (`Grid`).
     pub grid: Grid,
     pub gather: GatherBuffers,
     /// Whether the reflection also writes Lfs_j for the image (`new`).
@@ -776,7 +775,6 @@ impl Iteration {
             max_bits,
             overflow,
             capacity: capacity as u32,
-            resolution,
             grid,
             arrays,
             _owned: [fragments, spill, long_lines],

@@ -133,16 +133,16 @@ pub(crate) struct RenderArgs {
     /// a 2 x 2 block gathers through its own bundle, so that neighbouring pixels' errors are
     /// independent; the automatic --bundle-resolution is halved for them (as many lines a
     /// step).
-    #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = parse_bundles_per_step)]
-    bundles_per_step: Option<BundlesPerStep>,
+    #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = |v: &str| parse_choice(v, &firstshot::iteration::BUNDLES_PER_STEP_CHOICES))]
+    bundles_per_step: Option<Choice>,
     /// Lines of two widths in each bundle: fine lines (the --bundle-resolution) only in a
     /// window around the projection of the glossy patches, and outside it lines N fine lines
     /// wide: 1 (one level), 2, 4, or "auto" (the default: where glossy patches ask for lines,
     /// the widest that is at most twice the line width the image asks of a bundle and
     /// crosses the median patch that is not glossy once a step, else 1; docs/ALGORITHM.md 6,
     /// "Two levels of lines")
-    #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = parse_wide_lines)]
-    wide_lines: Option<WideLines>,
+    #[arg(long, allow_negative_numbers = true, value_name = "N|auto", value_parser = |v: &str| parse_choice(v, &firstshot::iteration::WIDE_LINES_CHOICES))]
+    wide_lines: Option<Choice>,
     /// Take each surface's first reflection of the lights, as the image gathers it from that
     /// surface, at the patch level (the paper's method) instead of at the point the gather
     /// meets it (the default, unless a light is an emitting shape).
@@ -807,38 +807,18 @@ fn parse_resolution(value: &str) -> std::result::Result<Resolution, String> {
     }
 }
 
-/// `--bundles-per-step`: 1, 4, or "auto" (`None`).
+/// A count from a fixed set, or "auto" (`None`): `--bundles-per-step`, `--wide-lines`.
 #[derive(Debug, Clone, Copy)]
-struct BundlesPerStep(Option<u32>);
+struct Choice(Option<u32>);
 
-fn parse_bundles_per_step(value: &str) -> std::result::Result<BundlesPerStep, String> {
-    let choices = firstshot::iteration::BUNDLES_PER_STEP_CHOICES;
-    match value {
-        "auto" => Ok(BundlesPerStep(None)),
-        _ => value
-            .parse::<u32>()
-            .ok()
-            .filter(|n| choices.contains(n))
-            .map(|n| BundlesPerStep(Some(n)))
-            .ok_or_else(|| format!("expected 1, 4 or \"auto\", got {value:?}")),
+fn parse_choice(value: &str, choices: &[u32]) -> std::result::Result<Choice, String> {
+    if value == "auto" {
+        return Ok(Choice(None));
     }
-}
-
-/// `--wide-lines`: 1, 2, 4, or "auto" (`None`).
-#[derive(Debug, Clone, Copy)]
-struct WideLines(Option<u32>);
-
-fn parse_wide_lines(value: &str) -> std::result::Result<WideLines, String> {
-    let choices = firstshot::iteration::WIDE_LINES_CHOICES;
-    match value {
-        "auto" => Ok(WideLines(None)),
-        _ => value
-            .parse::<u32>()
-            .ok()
-            .filter(|n| choices.contains(n))
-            .map(|n| WideLines(Some(n)))
-            .ok_or_else(|| format!("expected 1, 2, 4 or \"auto\", got {value:?}")),
-    }
+    value.parse::<u32>().ok().filter(|n| choices.contains(n)).map(|n| Choice(Some(n))).ok_or_else(|| {
+        let listed: Vec<String> = choices.iter().map(u32::to_string).collect();
+        format!("expected {} or \"auto\", got {value:?}", listed.join(", "))
+    })
 }
 
 fn parse_gather(value: &str) -> std::result::Result<GatherChoice, String> {

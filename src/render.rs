@@ -238,11 +238,18 @@ impl RenderOptions {
     }
 
     /// The grid of a render's bundles at `resolution` (`bundles_for`) with `per_step` of them
-    /// a step, around a sphere of `radius`: a fine window around the glossy patches and wide
-    /// lines outside it where `wide_lines` (or the automatic choice) asks for them and they
-    /// save lines (`iteration::fine_window`), else one level.
-    pub fn grid_for(&self, scene: &Scene, patches: &Patches, resolution: u32, per_step: u32) -> crate::iteration::Grid {
-        let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+    /// a step, for patches in a bounding sphere of `radius` (`scene_buffers::bounding_sphere`):
+    /// a fine window around the glossy patches and wide lines outside it where `wide_lines`
+    /// (or the automatic choice) asks for them and they save lines (`iteration::fine_window`),
+    /// else one level.
+    pub fn grid_for(
+        &self,
+        scene: &Scene,
+        patches: &Patches,
+        radius: f64,
+        resolution: u32,
+        per_step: u32,
+    ) -> crate::iteration::Grid {
         let wide = self.wide_lines.unwrap_or_else(|| {
             let needs = crate::iteration::BundleNeeds::of(patches, &scene.materials, radius, &self.views(scene));
             crate::iteration::auto_wide_lines(&needs, resolution, per_step)
@@ -907,7 +914,7 @@ impl<'a> Renderer<'a> {
         } else {
             let capacity =
                 initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, bundle_resolution);
-            let grid = options.grid_for(scene, patches, bundle_resolution, per_step);
+            let grid = options.grid_for(scene, patches, buffers.radius, bundle_resolution, per_step);
             if grid.window.is_some() {
                 let materials = &scene.materials;
                 buffers
@@ -1017,7 +1024,7 @@ impl<'a> Renderer<'a> {
     /// Fragment capacity of a bundle step and the bundle resolution.
     pub fn bundle_size(&self) -> (u32, u32) {
         let it = self.iteration();
-        (it.capacity, it.resolution)
+        (it.capacity, it.grid.resolution)
     }
 
     fn bundle_scene(&self) -> BundleScene {

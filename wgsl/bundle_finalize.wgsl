@@ -97,7 +97,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         vec4<f32>(mean_radiance, 0.0),
         sum,
         array<vec2<u32>, GLOSSY_HISTORY>());
-    if (materials[patches_at(j).material].kind == MATERIAL_PHONG) {
+    if (materials[material].kind == MATERIAL_PHONG) {
         let newest = vec2<u32>(pack_history_radiance(old_incoming.rgb), state_at(j).direction);
         next.earlier = array<vec2<u32>, GLOSSY_HISTORY>(
             newest, state_at(j).earlier[0], state_at(j).earlier[1], state_at(j).earlier[2], state_at(j).earlier[3],

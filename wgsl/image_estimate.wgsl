@@ -1022,7 +1022,8 @@ fn edge_received(at: Seen, toward: vec3<f32>, s: f32, lo: u32) -> Received {
     // In x's own line's width: a wide line's neighbours are a wide line away.
     let cell = cell_of(at.x);
     let base = vec2<i32>(floor(cell));
-    let width = line_at(base).spacing;
+    let own = line_at(base);
+    let width = own.spacing;
     let scaled = cell / width;
     let f = scaled - floor(scaled);
     let step = i32(width);
@@ -1041,7 +1042,7 @@ fn edge_received(at: Seen, toward: vec3<f32>, s: f32, lo: u32) -> Received {
         received = beside_received(at.j, at.x, toward, s, base + side);
     }
     if (!received.decided) {
-        var line = line_at(base);
+        var line = own;
         line.lo = lo;
         received = nearest_received(at.j, at.x, toward, s, line);
     }
