@@ -29,6 +29,28 @@ use crate::scene::{Light, LightSample, PatchKind, Patches, Rgb, SampleKind, Scen
 use crate::stages::light_window::WindowAtlas;
 use glam::DVec3;
 
+/// How the area lights and first-shot emitting shapes, whose point moves every pass, find each
+/// pixel's visibility (`--light-visibility`): a shadow ray through the scene's BVH
+/// (`shadow_bvh`, exact), or their windows rendered again at every pass (the paper's item
+/// buffers, exact where an occluder covers a texel centre around the direction). Point, spot
+/// and directional lights keep their windows either way: rendered once for the run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightVisibility {
+    #[default]
+    Rays,
+    Windows,
+}
+
+impl LightVisibility {
+    pub fn name(self) -> &'static str {
+        match self {
+            LightVisibility::Rays => "rays",
+            LightVisibility::Windows => "windows",
+        }
+    }
+}
+
 /// Texels of both atlases together at most (an id and a depth of 4 bytes each: 256 MiB).
 pub const SHADOW_TEXEL_BUDGET: u64 = 1 << 25;
 /// A directional light's parallel view has this many times the side of a cube face (16 times
@@ -114,6 +136,13 @@ pub struct DirectLights {
     near: f64,
     /// The scene's bounding sphere (centre, radius), which a directional light's view covers.
     bounds: (DVec3, f64),
+    /// What the area lights' visibility used: rays where asked and the BVH could be built
+    /// within the device's limits, else windows.
+    pub visibility: LightVisibility,
+    /// The shadow rays' BVH (`shadow_bvh`): one zeroed entry each where unused.
+    shadow_nodes: wgpu::Buffer,
+    shadow_triangles: wgpu::Buffer,
+    pub shadow_bvh_bytes: u64,
 }
 
 /// The face side asked of the lights' windows: `options.shadow_resolution`, else
@@ -316,6 +345,21 @@ impl DirectLights {
         let near = buffers.radius * 1e-6;
         let bounds = (buffers.centre, buffers.radius);
         let max_side = ctx.limits().max_texture_dimension_2d;
+        // Shadow rays where asked, where some light moves its point, and where the BVH fits
+        // the device's bindings (else the windows, as `--stats` reports).
+        let moving = sources.iter().any(|(source, _)| matches!(source, Source::Area { .. }));
+        let bvh = match options.light_visibility {
+            LightVisibility::Rays if moving => {
+                let binding = ctx.limits().max_storage_buffer_binding_size;
+                crate::shadow_bvh::ShadowBvh::build(&crate::gpu::scene_buffers::raster_triangles(patches)).filter(|b| {
+                    let fits = |len: usize, size: usize| (len * size) as u64 <= binding;
+                    fits(b.nodes.len(), std::mem::size_of::<crate::layout::GpuBvhNode>())
+                        && fits(b.triangles.len(), std::mem::size_of::<crate::layout::GpuBvhTriangle>())
+                })
+            }
+            _ => None,
+        };
+        let rays = bvh.is_some();
         // The side each face asks for: `--shadow-resolution` for all, else the automatic rule
         // per face where a window keeps its orientation (point and spot lights, an area light:
         // `auto_face_sides`), the whole scene's rule for the rest (an emitting shape's window
@@ -345,6 +389,8 @@ impl DirectLights {
                 .iter()
                 .zip(&wanted)
                 .enumerate()
+                // With shadow rays the area lights have no windows.
+                .filter(|(_, ((source, _), _))| !(rays && matches!(source, Source::Area { .. })))
                 .flat_map(|(i, ((source, position), wanted))| {
                     let atlas = if matches!(source, Source::Area { .. }) { PER_PASS } else { KEPT };
                     // A sun's one view spans the whole scene where a cube face spans a quarter
@@ -436,6 +482,22 @@ impl DirectLights {
             buffers::storage_init(device, "firstshot.direct_light.faces", &non_empty(&table_faces), usage);
         let kept = WindowAtlas::new(device, "kept", &faces_buffer, sizes[0]);
         let per_pass = WindowAtlas::new(device, "per_pass", &faces_buffer, sizes[1]);
+        let (nodes, triangles) = match &bvh {
+            Some(b) => (b.nodes.clone(), b.triangles.clone()),
+            None => (Vec::new(), Vec::new()),
+        };
+        let shadow_nodes = buffers::storage_init(
+            device,
+            "firstshot.direct_light.shadow_nodes",
+            &non_empty(&nodes),
+            wgpu::BufferUsages::empty(),
+        );
+        let shadow_triangles = buffers::storage_init(
+            device,
+            "firstshot.direct_light.shadow_triangles",
+            &non_empty(&triangles),
+            wgpu::BufferUsages::empty(),
+        );
         let out = DirectLights {
             lights,
             table,
@@ -450,6 +512,10 @@ impl DirectLights {
             prepared: None,
             near,
             bounds,
+            visibility: if rays { LightVisibility::Rays } else { LightVisibility::Windows },
+            shadow_nodes,
+            shadow_triangles,
+            shadow_bvh_bytes: bvh.as_ref().map_or(0, |b| b.bytes()),
         };
         let kept_faces = out.faces_in(KEPT);
         if !kept_faces.is_empty() {
@@ -475,20 +541,31 @@ impl DirectLights {
     /// `1 << faces`) and the atlases their faces lie in (bit `1 << KEPT`, `1 << PER_PASS`),
     /// so that the kernel is compiled without the others' code. An empty table keeps the
     /// defaults (every kind): nothing is evaluated then.
-    pub fn specialization(&self) -> [(&'static str, f64); 3] {
+    pub fn specialization(&self) -> [(&'static str, f64); 4] {
         let bit = |n: u32| 1u32.checked_shl(n).unwrap_or(u32::MAX);
         let kinds = self.table.iter().fold(0u32, |bits, l| bits | bit(l.kind));
         let faces = self.table.iter().fold(0u32, |bits, l| bits | bit(l.faces));
         let atlases = self.faces.iter().fold(0u32, |bits, f| bits | bit(f.tile[3]));
+        let rays = ("SHADOW_RAYS", f64::from(u8::from(self.visibility == LightVisibility::Rays)));
         match self.table.is_empty() {
-            true => [("LIGHT_KINDS", u32::MAX as f64), ("WINDOW_FACE_COUNTS", u32::MAX as f64), ("ATLASES", 3.0)],
-            false => [("LIGHT_KINDS", kinds as f64), ("WINDOW_FACE_COUNTS", faces as f64), ("ATLASES", atlases as f64)],
+            true => [("LIGHT_KINDS", u32::MAX as f64), ("WINDOW_FACE_COUNTS", u32::MAX as f64), ("ATLASES", 3.0), rays],
+            false => {
+                [("LIGHT_KINDS", kinds as f64), ("WINDOW_FACE_COUNTS", faces as f64), ("ATLASES", atlases as f64), rays]
+            }
         }
     }
 
     /// Whether a pass must render windows of its own (the scene has first-shot area lights).
     pub fn has_area_lights(&self) -> bool {
         self.lights.iter().any(|l| matches!(l.source, Source::Area { .. }))
+    }
+
+    pub fn shadow_nodes(&self) -> &wgpu::Buffer {
+        &self.shadow_nodes
+    }
+
+    pub fn shadow_triangles(&self) -> &wgpu::Buffer {
+        &self.shadow_triangles
     }
 
     pub fn lights_buffer(&self) -> &wgpu::Buffer {

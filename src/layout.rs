@@ -294,6 +294,29 @@ pub struct GpuWindowFace {
     pub tile: [u32; 4],
 }
 
+/// A node of the shadow rays' BVH (`shadow_bvh`), in depth-first order: its box, the node to
+/// go on with where a segment misses it or after its triangles (`escape`), and `leaf`:
+/// `shadow_bvh::INNER` for an inner node (its first child is the next node), else its first
+/// triangle << `LEAF_COUNT_BITS` | (its triangle count - 1). WGSL: `BvhNode`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuBvhNode {
+    pub min: [f32; 3],
+    pub escape: u32,
+    pub max: [f32; 3],
+    pub leaf: u32,
+}
+
+/// A triangle of the shadow rays' BVH, as the segment test wants it: a corner and the two
+/// edges from it (w unused). WGSL: `BvhTriangle`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
+pub struct GpuBvhTriangle {
+    pub v0: [f32; 4],
+    pub e1: [f32; 4],
+    pub e2: [f32; 4],
+}
+
 /// One face of a light sample's window, for the first-shot reduction.
 /// WGSL: `FaceParams`.
 #[repr(C)]
@@ -400,6 +423,8 @@ assert_size_multiple_of_16!(
     GpuEstimateParams,
     GpuDirectLight,
     GpuWindowFace,
+    GpuBvhNode,
+    GpuBvhTriangle,
     GpuFaceParams,
     GpuAppendParams,
     GpuBundle,
@@ -427,6 +452,8 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count, mis, first_row }),
         layout!(GpuDirectLight => "DirectLight" { position, normal, strength, cone, kind, first_face, faces }),
         layout!(GpuWindowFace => "WindowFace" { view, tile }),
+        layout!(GpuBvhNode => "BvhNode" { min, escape, max, leaf }),
+        layout!(GpuBvhTriangle => "BvhTriangle" { v0, e1, e2 }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
         layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
         layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state, image_step, pixel_class, pixel_stride, pixel_shuffle, fine_rect, wide, line_capacity, wide_lines, line_count }),
@@ -469,9 +496,13 @@ pub fn wgsl_constants() -> String {
          const PREFIX_SUM_PER_THREAD: u32 = {PREFIX_SUM_PER_THREAD}u;\n\
          const FIRST_SHOT_RUN: u32 = {FIRST_SHOT_RUN}u;\n\
          const GLOSSY_HISTORY: u32 = {GLOSSY_HISTORY}u;\n\
+         const SHADOW_INNER: u32 = {SHADOW_INNER}u;\n\
+         const SHADOW_LEAF_COUNT_BITS: u32 = {SHADOW_LEAF_COUNT_BITS}u;\n\
          const PI: f32 = {pi:?};\n\
          const FIXED_POINT_SCALE: f32 = {scale:?};\n\
          const SMOOTH_EDGE_COS: f32 = {smooth:?};\n",
+        SHADOW_INNER = crate::shadow_bvh::INNER,
+        SHADOW_LEAF_COUNT_BITS = crate::shadow_bvh::LEAF_COUNT_BITS,
         pi = std::f32::consts::PI,
         scale = FIXED_POINT_SCALE,
         smooth = SMOOTH_EDGE_COS

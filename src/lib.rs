@@ -21,6 +21,7 @@ pub mod error;
 pub mod files;
 pub mod first_shot;
 pub mod scene;
+pub mod shadow_bvh;
 pub mod shard;
 
 pub use error::{Error, Result};

@@ -9,6 +9,7 @@ use cli::io::say;
 use cli::outputs::OutputPlan;
 use cli::signals::StopSignals;
 use firstshot::checkpoint::Checkpoint;
+use firstshot::direct_light::LightVisibility;
 use firstshot::first_shot::LightWindow;
 use firstshot::gpu::context::{AdapterChoice, Context, list_adapters};
 use firstshot::image::Image as RenderedImage;
@@ -153,6 +154,13 @@ pub(crate) struct RenderArgs {
     /// adapter (split on a CPU adapter, fused on a GPU). The image is the same.
     #[arg(long, value_name = "auto|fused|split", value_parser = parse_gather, default_value = "auto")]
     gather: GatherChoice,
+    /// How the per-pixel direct light of area lights and emitting shapes, whose point moves
+    /// every pass, finds what it sees: `rays`, a shadow ray per pixel through a BVH of the
+    /// scene's triangles (exact), or `windows`, item buffers rendered at every pass's point
+    /// (the paper's; exact where an occluder covers a texel centre). Point, spot and
+    /// directional lights keep their windows, rendered once
+    #[arg(long, value_name = "rays|windows", value_parser = parse_light_visibility, default_value = "rays")]
+    light_visibility: LightVisibility,
     /// The camera to render, by name: "camera" for the [camera] table, or a [[cameras]]
     /// entry's name (default: the first of the scene's cameras).
     #[arg(long, value_name = "NAME")]
@@ -488,6 +496,7 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     options.memory_limit = args.memory_limit.map(|mib| mib << 20);
     options.patch_first_bounce |= args.patch_first_bounce;
     options.gather = args.gather;
+    options.light_visibility = args.light_visibility;
     if let Some(b) = args.bundles_per_step {
         options.bundles_per_step = b.0;
     }
@@ -819,6 +828,14 @@ fn parse_choice(value: &str, choices: &[u32]) -> std::result::Result<Choice, Str
         let listed: Vec<String> = choices.iter().map(u32::to_string).collect();
         format!("expected {} or \"auto\", got {value:?}", listed.join(", "))
     })
+}
+
+fn parse_light_visibility(value: &str) -> std::result::Result<LightVisibility, String> {
+    match value {
+        "rays" => Ok(LightVisibility::Rays),
+        "windows" => Ok(LightVisibility::Windows),
+        _ => Err(format!("expected \"rays\" or \"windows\", got {value:?}")),
+    }
 }
 
 fn parse_gather(value: &str) -> std::result::Result<GatherChoice, String> {

@@ -178,6 +178,17 @@ pub fn predict(
     let suns = scene.lights.iter().filter(|l| matches!(l, crate::scene::Light::Directional { .. })).count() as u64;
     let shadow_texels =
         crate::direct_light::SHADOW_TEXEL_BUDGET.min(face * (6 * scene.lights.len() as u64 + 10 * suns));
+    // The shadow rays' BVH (`shadow_bvh`), where area lights or emitting shapes take rays: a
+    // triangle (48 bytes) and at most two nodes (32 bytes each) a rasterised triangle. The
+    // windows' texels above stay counted: a BVH that does not fit falls back to them.
+    let moving_lights =
+        scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Area { .. })) || !patches.emitters.is_empty();
+    let shadow_bvh_bytes = match options.light_visibility {
+        crate::direct_light::LightVisibility::Rays if options.first_shot && moving_lights => {
+            crate::gpu::scene_buffers::raster_triangle_count(patches) * (48 + 2 * 32)
+        }
+        _ => 0,
+    };
     let device_bytes = n * (device_bytes_per_patch + FIRST_SHOT_BYTES_PER_PATCH)
         + pixels * DEVICE_BYTES_PER_PIXEL
         + supersampled_camera_bytes
@@ -185,7 +196,8 @@ pub fn predict(
         + fragments * BYTES_PER_FRAGMENT
         + first_shot_pairs * BYTES_PER_PAIR
         + hemicube
-        + shadow_texels * 8;
+        + shadow_texels * 8
+        + shadow_bvh_bytes;
     let host_bytes = BASE_BYTES + n * host_bytes_per_patch + pixels * HOST_BYTES_PER_PIXEL;
     MemoryPlan {
         patches: n,

@@ -162,6 +162,8 @@ pub struct RenderOptions {
     /// Whether the item buffers draw only the chunks of triangles that can reach their view
     /// (`gpu::frustum`; the default). Set only by tests, to check that it changes no texel.
     pub cull_raster: bool,
+    /// How the area lights' per-pixel visibility is found (`--light-visibility`).
+    pub light_visibility: crate::direct_light::LightVisibility,
 }
 
 impl RenderOptions {
@@ -192,6 +194,7 @@ impl RenderOptions {
             gather: Default::default(),
             camera_supersample: None,
             cull_raster: true,
+            light_visibility: Default::default(),
         }
     }
 
@@ -360,6 +363,9 @@ pub struct RenderStats {
     /// their atlases.
     pub shadow_resolution: u32,
     pub shadow_atlas_texels: u64,
+    /// How the area lights' and emitting shapes' visibility was found: "rays" or "windows"
+    /// (`--light-visibility`; windows where the scene's BVH does not fit the device).
+    pub light_visibility: &'static str,
     /// The memory predicted before any GPU work, and the peak resident set reached
     /// (`memory::MemoryPlan`).
     pub memory: crate::memory::MemoryPlan,
@@ -1401,6 +1407,7 @@ impl<'a> Renderer<'a> {
                 first_shot_ms: fs.map_or(0.0, |f| f.ms),
                 shadow_resolution: self.direct.resolution,
                 shadow_atlas_texels: self.direct.atlas_texels(),
+                light_visibility: self.direct.visibility.name(),
                 memory: crate::memory::MemoryPlan { peak_rss_bytes: crate::memory::peak_rss(), ..self.memory.clone() },
                 bundle_resolution: self.bundle_resolution,
                 bundles_per_step: self.per_step,

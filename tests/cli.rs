@@ -148,7 +148,7 @@ fn test03_no_first_shot_with_a_point_light_is_a_usage_error() {
 }
 
 /// The stats keys of CLI.md.
-const STATS_KEYS: [&str; 18] = [
+const STATS_KEYS: [&str; 19] = [
     "adapter",
     "patches",
     "memory",
@@ -160,6 +160,7 @@ const STATS_KEYS: [&str; 18] = [
     "wide_lines",
     "bundle_lines",
     "gather",
+    "light_visibility",
     "first_shot",
     "first_shot_ms",
     "iterations",
@@ -231,6 +232,9 @@ fn test04_tiny_render_writes_exr_png_and_stats() {
     assert_eq!(json["seed"], 1);
     assert_eq!(json["light_samples"], 9);
     assert_eq!(json["first_shot"], true);
+    // The Cornell box's area light takes shadow rays (the default), so it has no window.
+    assert_eq!(json["light_visibility"], "rays");
+    assert_eq!(json["shadow_atlas_texels"], 0, "{text}");
     assert_eq!(json["iterations"], 0);
     assert_eq!(json["notes"], serde_json::json!([]), "the Cornell box has nothing to note");
     assert!(json["patches"].as_u64().is_some_and(|n| n > 0), "{text}");

@@ -47,6 +47,8 @@
 @group(1) @binding(1) var<storage, read> faces: array<WindowFace>;
 @group(1) @binding(2) var kept_atlas: texture_2d<u32>;
 @group(1) @binding(3) var pass_atlas: texture_2d<u32>;
+@group(1) @binding(4) var<storage, read> shadow_nodes: array<BvhNode>;
+@group(1) @binding(5) var<storage, read> shadow_triangles: array<BvhTriangle>;
 @group(2) @binding(0) var<storage, read> bundle: Bundle;
 
 // The step's bundle, read once by each gather invocation (`this_bundle = bundle`). It is bound
@@ -102,6 +104,11 @@ override FUSED_GATHER: bool = false;
 // gather and direct light (params.mis still says whether this run shares).
 override MIS: bool = true;
 
+// True where the area lights and emitting shapes find their visibility by shadow rays through
+// the scene's BVH (`shadow_bvh`, `occluded`) instead of their windows: their table entries
+// then have no faces.
+override SHADOW_RAYS: bool = false;
+
 fn has_light(kind: u32) -> bool {
     return (LIGHT_KINDS & (1u << kind)) != 0u;
 }
@@ -149,6 +156,69 @@ fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
     }
     let t = dot(e2, q) * inv;
     return t > SEGMENT_EPSILON && t < 1.0 - SEGMENT_EPSILON;
+}
+
+// Whether the segment y + t dir, SEGMENT_EPSILON < t < 1 - SEGMENT_EPSILON, crosses triangle
+// k of the shadow rays' BVH (Moller-Trumbore, either side).
+fn shadow_triangle_hit(k: u32, y: vec3<f32>, dir: vec3<f32>) -> bool {
+    let a = shadow_triangles[k].v0.xyz;
+    let e1 = shadow_triangles[k].e1.xyz;
+    let e2 = shadow_triangles[k].e2.xyz;
+    let p = cross(dir, e2);
+    let det = dot(e1, p);
+    if (abs(det) < 1e-30) {
+        return false;
+    }
+    let inv = 1.0 / det;
+    let s = y - a;
+    let u = dot(s, p) * inv;
+    if (u < 0.0 || u > 1.0) {
+        return false;
+    }
+    let q = cross(s, e1);
+    let v = dot(dir, q) * inv;
+    if (v < 0.0 || u + v > 1.0) {
+        return false;
+    }
+    let t = dot(e2, q) * inv;
+    return t > SEGMENT_EPSILON && t < 1.0 - SEGMENT_EPSILON;
+}
+
+// Whether some triangle of the scene crosses the segment from y to x, its ends left out: a
+// shadow ray through the BVH (`shadow_bvh::ShadowBvh::occluded` is the same walk on the host).
+// The nodes are in depth-first order with escapes, so the walk needs no stack (a CPU adapter
+// keeps a per-lane stack by selecting among all its entries at every push and pop). Any
+// hit ends it. Only the kept part of the segment enters a box: a box that holds an end alone
+// (the light's own triangles, x's own surface) is skipped.
+fn occluded(y: vec3<f32>, x: vec3<f32>) -> bool {
+    let dir = x - y;
+    let inv = 1.0 / select(dir, vec3<f32>(1e-30), abs(dir) < vec3<f32>(1e-30));
+    let end = arrayLength(&shadow_nodes);
+    var node = 0u;
+    while (node < end) {
+        let t0 = (shadow_nodes[node].min - y) * inv;
+        let t1 = (shadow_nodes[node].max - y) * inv;
+        let lo = min(t0, t1);
+        let hi = max(t0, t1);
+        let near = max(max(lo.x, lo.y), max(lo.z, SEGMENT_EPSILON));
+        let far = min(min(hi.x, hi.y), min(hi.z, 1.0 - SEGMENT_EPSILON));
+        let leaf = shadow_nodes[node].leaf;
+        if (near <= far) {
+            if (leaf == SHADOW_INNER) {
+                node++;
+                continue;
+            }
+            let first = leaf >> SHADOW_LEAF_COUNT_BITS;
+            let last = first + (leaf & ((1u << SHADOW_LEAF_COUNT_BITS) - 1u));
+            for (var k = first; k <= last; k++) {
+                if (shadow_triangle_hit(k, y, dir)) {
+                    return true;
+                }
+            }
+        }
+        node = shadow_nodes[node].escape;
+    }
+    return false;
 }
 
 // The id at texel `at` of atlas `atlas` (WindowFace::tile.w: 0 the kept faces', 1 the
@@ -449,7 +519,15 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
                 g *= light_share(r2, cos_l, lights[i].normal.w);
             }
         }
-        if (g > 0.0 && visible(y, lights[i].first_face, lights[i].faces, j, n, x)) {
+        var lit = g > 0.0;
+        if (lit) {
+            if (SHADOW_RAYS && has_light(LIGHT_AREA) && kind == LIGHT_AREA) {
+                lit = !occluded(y, x);
+            } else {
+                lit = visible(y, lights[i].first_face, lights[i].faces, j, n, x);
+            }
+        }
+        if (lit) {
             sum += lights[i].strength.rgb * g * brdf(m, n, w_in, w_out);
         }
     }

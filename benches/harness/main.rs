@@ -89,6 +89,9 @@ struct Args {
     /// level; default: the automatic choice).
     #[arg(long, value_name = "N")]
     wide_lines: Option<u32>,
+    /// The area lights' visibility, as `firstshot --light-visibility` (default: rays).
+    #[arg(long, value_name = "rays|windows")]
+    light_visibility: Option<String>,
     /// Render every camera of each scene (`[camera]` and its `[[cameras]]`) in each step, as
     /// `firstshot --all-cameras` does (throughput: the stage profile then shows each view's
     /// image stages).
@@ -168,6 +171,7 @@ pub struct Config {
     pub steps: u32,
     pub bundle_resolution: Option<u32>,
     pub wide_lines: Option<u32>,
+    pub light_visibility: firstshot::direct_light::LightVisibility,
     pub all_cameras: bool,
     pub first_shot: bool,
     pub long_steps: u32,
@@ -201,6 +205,7 @@ impl Config {
         if self.wide_lines.is_some() {
             o.wide_lines = self.wide_lines;
         }
+        o.light_visibility = self.light_visibility;
         o.first_shot = self.first_shot;
         if self.all_cameras {
             // Every camera at the run's image size, as `firstshot --all-cameras --width W --height H`.
@@ -471,6 +476,14 @@ fn main() -> ExitCode {
         steps: args.steps.unwrap_or(if quick { 8 } else { 40 }).max(1),
         bundle_resolution: args.bundle_resolution,
         wide_lines: args.wide_lines,
+        light_visibility: match args.light_visibility.as_deref() {
+            None | Some("rays") => firstshot::direct_light::LightVisibility::Rays,
+            Some("windows") => firstshot::direct_light::LightVisibility::Windows,
+            Some(other) => {
+                eprintln!("--light-visibility: expected \"rays\" or \"windows\", got {other:?}");
+                std::process::exit(2);
+            }
+        },
         all_cameras: args.all_cameras,
         first_shot: !args.no_first_shot,
         long_steps: args.long_steps.unwrap_or(if quick { 64 } else { 2000 }).max(1),

@@ -56,6 +56,10 @@ pub const SPEC: KernelSpec = KernelSpec {
             uint_texture("kept_atlas"),
             // Faces with tile.w == 1: the area lights' windows of this pass.
             uint_texture("pass_atlas"),
+            // The shadow rays' BVH of the scene's triangles (`shadow_bvh`), where the area
+            // lights take rays instead of windows (SHADOW_RAYS).
+            read::<crate::layout::GpuBvhNode>("shadow_nodes"),
+            read::<crate::layout::GpuBvhTriangle>("shadow_triangles"),
         ],
         // The gather (`iteration::GatherBuffers`), after the step's transfer sorted its lines.
         &[
@@ -336,6 +340,8 @@ impl ImageEstimate {
                 ("faces", direct.faces_buffer().into()),
                 ("kept_atlas", direct.kept_atlas().into()),
                 ("pass_atlas", direct.pass_atlas().into()),
+                ("shadow_nodes", direct.shadow_nodes().into()),
+                ("shadow_triangles", direct.shadow_triangles().into()),
             ],
         );
         let gather_group = Self::gather_group(device, &built, gather);

@@ -141,6 +141,23 @@ struct WindowFace {
     tile: vec4<u32>,     // xy top-left texel in the atlas, z rows inside the window
 }
 
+// A node of the shadow rays' BVH in depth-first order (Rust: GpuBvhNode): escape the node
+// after its subtree; leaf SHADOW_INNER for an inner node (its first child is the next node),
+// else first triangle << SHADOW_LEAF_COUNT_BITS | (count - 1).
+struct BvhNode {
+    min: vec3<f32>,
+    escape: u32,
+    max: vec3<f32>,
+    leaf: u32,
+}
+
+// A triangle of the shadow rays' BVH (Rust: GpuBvhTriangle): a corner and its two edges.
+struct BvhTriangle {
+    v0: vec4<f32>,
+    e1: vec4<f32>,
+    e2: vec4<f32>,
+}
+
 // One face of a light sample's window (Rust: GpuFaceParams).
 struct FaceParams {
     sample: u32,

@@ -1,0 +1,302 @@
+//! The scene's triangles in a bounding volume hierarchy, for the per-pixel direct light's shadow
+//! rays (docs/ALGORITHM.md 6, "Visibility").
+//!
+//! Every pass of the image's direct light takes a new point y on each area light (and on each
+//! first-shot emitting shape), and every pixel's point x asks whether the segment from y to x
+//! is free. The paper's way, and firstshot's before, is an item buffer around y (a window)
+//! rendered again at every pass, read at the texels around x's direction: exact only where an
+//! occluder covers one of those texel centres, and on a CPU adapter a raster of the whole
+//! scene per pass (the Sierpinski scene: 50 ms of a 140 ms step that estimates the direct
+//! light). A shadow ray through this hierarchy is exact everywhere and costs nothing to set
+//! up per pass: the hierarchy is built once, on the host, over the rasterised triangles
+//! (`scene_buffers::raster_triangles`, a lattice drawn as its source triangle), and
+//! `wgsl/image_estimate.wgsl` (`occluded`) walks it.
+//!
+//! The build is obvhs's (the burn-in's random walk casts its rays with it too); this module
+//! flattens its tree into two tables the kernel reads (`GpuBvhNode`, `GpuBvhTriangle`, the
+//! triangles in leaf order) and bounds its depth, which the kernel's stack must hold.
+
+use crate::gpu::scene_buffers::RasterTriangles;
+use crate::layout::{GpuBvhNode, GpuBvhTriangle};
+use glam::{Vec3, Vec3A};
+use obvhs::BvhBuildParams;
+use obvhs::bvh2::builder::build_bvh2_from_tris;
+use obvhs::triangle::Triangle;
+
+/// The segment from y to x leaves out this share of its length at each end: its ends lie on
+/// the light and on x's own surface (the windows' test, `SEGMENT_EPSILON` in the kernel).
+pub const SEGMENT_EPSILON: f32 = 1e-4;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShadowBvh {
+    pub nodes: Vec<GpuBvhNode>,
+    pub triangles: Vec<GpuBvhTriangle>,
+    /// Nodes on the longest path from the root to a leaf.
+    pub depth: u32,
+}
+
+impl ShadowBvh {
+    /// The hierarchy over `raster`'s triangles (a patch's twin, drawn as a second triangle,
+    /// is left out: it lies in the same plane). `None` for a scene without triangles, or a
+    /// leaf of more triangles than `LEAF_COUNT_MASK + 1` (obvhs makes at most 8).
+    pub fn build(raster: &RasterTriangles) -> Option<ShadowBvh> {
+        let corner = |v: &crate::layout::RasterVertex| Vec3A::from(Vec3::from(v.position));
+        let mut source: Vec<[Vec3A; 3]> = Vec::with_capacity(raster.vertices.len() / 3);
+        for tri in raster.vertices.chunks_exact(3) {
+            let corners = [corner(&tri[0]), corner(&tri[1]), corner(&tri[2])];
+            // A twin (the back of a two-sided surface) follows its front with the same corners.
+            if source.last().is_some_and(|last| same_corners(last, &corners)) {
+                continue;
+            }
+            source.push(corners);
+        }
+        if source.is_empty() {
+            return None;
+        }
+        let triangles: Vec<Triangle> = source.iter().map(|&[v0, v1, v2]| Triangle { v0, v1, v2 }).collect();
+        let bvh = build_bvh2_from_tris(&triangles, BvhBuildParams::fast_build(), &mut Default::default());
+        // Leaves index the triangle table directly: the triangles go in the order of obvhs's
+        // primitive indices.
+        let ordered: Vec<GpuBvhTriangle> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| {
+                let [v0, v1, v2] = source[i as usize];
+                let v4 = |v: Vec3A| [v.x, v.y, v.z, 0.0];
+                GpuBvhTriangle { v0: v4(v0), e1: v4(v1 - v0), e2: v4(v2 - v0) }
+            })
+            .collect();
+        let (nodes, depth) = threaded(&bvh.nodes);
+        Some(ShadowBvh { nodes, triangles: ordered, depth })
+    }
+
+    /// Bytes of both tables on the device.
+    pub fn bytes(&self) -> u64 {
+        (self.nodes.len() * std::mem::size_of::<GpuBvhNode>()
+            + self.triangles.len() * std::mem::size_of::<GpuBvhTriangle>()) as u64
+    }
+
+    /// Whether a triangle crosses the segment from y to x, its ends left out: the kernel's
+    /// `occluded`, step for step, on the host (tests hold it against every triangle).
+    pub fn occluded(&self, y: Vec3, x: Vec3) -> bool {
+        self.occluded_counted(y, x).0
+    }
+
+    pub fn occluded_counted(&self, y: Vec3, x: Vec3) -> (bool, u64, u64) {
+        let (mut visited, mut tested) = (0u64, 0u64);
+        let dir = x - y;
+        let inv = safe_inverse(dir);
+        let mut node = 0usize;
+        while node < self.nodes.len() {
+            let n = &self.nodes[node];
+            visited += 1;
+            let (t_near, t_far) = slab(Vec3::from(n.min), Vec3::from(n.max), y, inv);
+            if t_near <= t_far {
+                if n.leaf == INNER {
+                    node += 1;
+                    continue;
+                }
+                let first = n.leaf >> LEAF_COUNT_BITS;
+                for k in first..=first + (n.leaf & LEAF_COUNT_MASK) {
+                    tested += 1;
+                    if segment_hits(&self.triangles[k as usize], y, dir) {
+                        return (true, visited, tested);
+                    }
+                }
+            }
+            node = n.escape as usize;
+        }
+        (false, visited, tested)
+    }
+}
+
+/// `GpuBvhNode::leaf` of an inner node.
+pub const INNER: u32 = u32::MAX;
+/// A leaf's `GpuBvhNode::leaf`: its first triangle << LEAF_COUNT_BITS | (its count - 1).
+pub const LEAF_COUNT_BITS: u32 = 4;
+pub const LEAF_COUNT_MASK: u32 = (1 << LEAF_COUNT_BITS) - 1;
+
+/// obvhs's tree (children side by side at `first_index`) in depth-first order, each node with
+/// its escape: the node to go on with where the segment misses its box, or after its leaf's
+/// triangles (the next subtree to the right; `nodes.len()` past the last). An inner node's
+/// first child is the next node. So the kernel walks the tree without a stack, which a CPU
+/// adapter keeps in registers only by selecting among all its entries at every push and
+/// pop. Returns the nodes and the tree's depth.
+fn threaded(tree: &[obvhs::bvh2::node::Bvh2Node]) -> (Vec<GpuBvhNode>, u32) {
+    let mut out: Vec<GpuBvhNode> = Vec::with_capacity(tree.len());
+    let mut depth = 0;
+    // Preorder, (tree node, its depth), with an explicit stack: the right child pushed first.
+    let mut pending = vec![(0usize, 1u32)];
+    let mut order: Vec<(usize, u32)> = Vec::with_capacity(tree.len());
+    while let Some((t, d)) = pending.pop() {
+        depth = depth.max(d);
+        order.push((t, d));
+        let n = &tree[t];
+        if n.prim_count == 0 {
+            pending.push((n.first_index as usize + 1, d + 1));
+            pending.push((n.first_index as usize, d + 1));
+        }
+    }
+    // In preorder a node's escape is the first later node whose depth is at most its own.
+    let mut escape = vec![order.len() as u32; order.len()];
+    let mut waiting: Vec<usize> = Vec::new();
+    for (i, &(_, d)) in order.iter().enumerate() {
+        while let Some(&w) = waiting.last() {
+            if order[w].1 >= d {
+                escape[w] = i as u32;
+                waiting.pop();
+            } else {
+                break;
+            }
+        }
+        waiting.push(i);
+    }
+    for (i, &(t, _)) in order.iter().enumerate() {
+        let n = &tree[t];
+        let leaf = if n.prim_count == 0 {
+            INNER
+        } else {
+            assert!(n.prim_count <= LEAF_COUNT_MASK + 1 && n.first_index < INNER >> LEAF_COUNT_BITS);
+            n.first_index << LEAF_COUNT_BITS | (n.prim_count - 1)
+        };
+        out.push(GpuBvhNode { min: n.aabb.min.to_array(), escape: escape[i], max: n.aabb.max.to_array(), leaf });
+    }
+    (out, depth)
+}
+
+fn same_corners(a: &[Vec3A; 3], b: &[Vec3A; 3]) -> bool {
+    a.iter().all(|p| b.contains(p))
+}
+
+/// 1 / d per axis, with a zero component taken as a tiny one (the slab test then sees an
+/// infinite slope, as it should, instead of 0 x infinity).
+fn safe_inverse(d: Vec3) -> Vec3 {
+    let tiny = |v: f32| if v.abs() < 1e-30 { 1e-30 } else { v };
+    Vec3::new(1.0 / tiny(d.x), 1.0 / tiny(d.y), 1.0 / tiny(d.z))
+}
+
+/// The segment's parameters where it enters and leaves the box, clipped to the segment.
+fn slab(min: Vec3, max: Vec3, y: Vec3, inv: Vec3) -> (f32, f32) {
+    let t0 = (min - y) * inv;
+    let t1 = (max - y) * inv;
+    // Only the kept part of the segment: a box that holds the segment's ends alone (the light's
+    // own triangles, x's own surface) is not entered.
+    let near = t0.min(t1).max_element().max(SEGMENT_EPSILON);
+    let far = t0.max(t1).min_element().min(1.0 - SEGMENT_EPSILON);
+    (near, far)
+}
+
+/// Moller-Trumbore, either side, for t strictly inside the segment's kept part.
+fn segment_hits(t: &GpuBvhTriangle, y: Vec3, dir: Vec3) -> bool {
+    let a = Vec3::from_slice(&t.v0);
+    let e1 = Vec3::from_slice(&t.e1);
+    let e2 = Vec3::from_slice(&t.e2);
+    let p = dir.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-30 {
+        return false;
+    }
+    let inv = 1.0 / det;
+    let s = y - a;
+    let u = s.dot(p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return false;
+    }
+    let q = s.cross(e1);
+    let v = dir.dot(q) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return false;
+    }
+    let t = e2.dot(q) * inv;
+    t > SEGMENT_EPSILON && t < 1.0 - SEGMENT_EPSILON
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::layout::RasterVertex;
+
+    fn raster(triangles: &[[Vec3; 3]]) -> RasterTriangles {
+        let mut out = RasterTriangles::default();
+        for (i, t) in triangles.iter().enumerate() {
+            for v in t {
+                out.vertices.push(RasterVertex { position: v.to_array(), patch: i as u32 });
+                out.lattice.push(1);
+            }
+        }
+        out
+    }
+
+    /// A deterministic cloud of small random triangles in the unit cube.
+    fn cloud(count: usize, seed: u64) -> Vec<[Vec3; 3]> {
+        let mut rng = crate::rng::StepRng::new(seed, 0);
+        let mut f = || rng.uniform() as f32;
+        (0..count)
+            .map(|_| {
+                let c = Vec3::new(f(), f(), f());
+                let e = |f: &mut dyn FnMut() -> f32| Vec3::new(f() - 0.5, f() - 0.5, f() - 0.5) * 0.15;
+                [c, c + e(&mut f), c + e(&mut f)]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn test01_the_hierarchy_finds_what_every_triangle_finds() {
+        // The oracle: the segment test against every triangle, no hierarchy.
+        let triangles = cloud(3000, 7);
+        let bvh = ShadowBvh::build(&raster(&triangles)).expect("a tree");
+        assert_eq!(bvh.triangles.len(), triangles.len());
+        let brute: Vec<GpuBvhTriangle> = triangles
+            .iter()
+            .map(|&[v0, v1, v2]| GpuBvhTriangle {
+                v0: [v0.x, v0.y, v0.z, 0.0],
+                e1: (v1 - v0).extend(0.0).to_array(),
+                e2: (v2 - v0).extend(0.0).to_array(),
+            })
+            .collect();
+        let mut rng = crate::rng::StepRng::new(11, 0);
+        let mut point = || Vec3::new(rng.uniform() as f32, rng.uniform() as f32, rng.uniform() as f32) * 1.4 - 0.2;
+        let (mut blocked, mut free) = (0, 0);
+        for _ in 0..4000 {
+            let (y, x) = (point(), point());
+            let expected = brute.iter().any(|t| segment_hits(t, y, x - y));
+            assert_eq!(bvh.occluded(y, x), expected, "segment {y} -> {x}");
+            if expected { blocked += 1 } else { free += 1 }
+        }
+        // Both answers occur often: the test says something either way.
+        assert!(blocked > 500 && free > 500, "blocked {blocked}, free {free}");
+        assert!(bvh.depth > 5, "depth {}", bvh.depth);
+    }
+
+    #[test]
+    fn test02_the_ends_and_twins_are_left_out() {
+        // A floor square of two triangles and its twins: a segment that ends on it is not
+        // blocked by it, one that passes through it is; the twins are not stored twice.
+        let a = Vec3::new(-1.0, 0.0, -1.0);
+        let b = Vec3::new(1.0, 0.0, -1.0);
+        let c = Vec3::new(1.0, 0.0, 1.0);
+        let d = Vec3::new(-1.0, 0.0, 1.0);
+        let mut r = raster(&[[a, d, c], [a, c, b]]);
+        // Twins: the same corners, reversed, with the twin bit, each after its front.
+        let mut with_twins = RasterTriangles::default();
+        for (i, tri) in r.vertices.chunks_exact(3).enumerate() {
+            with_twins.vertices.extend_from_slice(tri);
+            let twin = [tri[0], tri[2], tri[1]]
+                .map(|v| RasterVertex { patch: (2 * i as u32 + 1) | crate::layout::VERTEX_TWIN_BIT, ..v });
+            with_twins.vertices.extend_from_slice(&twin);
+        }
+        with_twins.lattice = vec![1; with_twins.vertices.len()];
+        r = with_twins;
+        let bvh = ShadowBvh::build(&r).expect("a tree");
+        assert_eq!(bvh.triangles.len(), 2);
+        let light = Vec3::new(0.1, 3.0, 0.2);
+        assert!(!bvh.occluded(light, Vec3::new(0.3, 0.0, -0.4)), "a point on the floor sees the light");
+        assert!(bvh.occluded(light, Vec3::new(0.3, -1.0, -0.4)), "a point below the floor does not");
+        assert!(!bvh.occluded(light, Vec3::new(3.0, -1.0, 0.0)), "beside the floor it does");
+    }
+
+    #[test]
+    fn test03_an_empty_scene_has_no_tree() {
+        assert!(ShadowBvh::build(&RasterTriangles::default()).is_none());
+    }
+}
