@@ -344,6 +344,32 @@ fn test07_an_image_sum_in_bands_of_rows_is_the_same_bits() {
     assert_eq!(whole.image.pixels, banded.image.pixels);
 }
 
+/// `head` and the cracked square of test08 and test21: the square [-0.3, 0.3]^2 at y = 0.8 as
+/// 20 x 20 cells of two triangles each (smaller than patch_size 0.06, so that each is one
+/// patch), every triangle shrunk by 1e-5 toward its centre, two-sided.
+fn cracked_square(head: &str) -> String {
+    let mut cracked = head.to_string();
+    let corner = |i: usize, k: usize| [-0.3 + 0.03 * i as f64, 0.8, -0.3 + 0.03 * k as f64];
+    for i in 0..20 {
+        for k in 0..20 {
+            for tri in [
+                [corner(i, k), corner(i, k + 1), corner(i + 1, k + 1)],
+                [corner(i, k), corner(i + 1, k + 1), corner(i + 1, k)],
+            ] {
+                let c: [f64; 3] = std::array::from_fn(|a| tri.iter().map(|v| v[a]).sum::<f64>() / 3.0);
+                let v = tri.map(|v| {
+                    format!("{:?}", std::array::from_fn::<f64, 3, _>(|a| c[a] + (v[a] - c[a]) * (1.0 - 1e-5)))
+                });
+                cracked += &format!(
+                    "[[shapes]]\ntype = \"triangle\"\nvertices = [{}, {}, {}]\nmaterial = \"grey\"\ntwo_sided = true\n",
+                    v[0], v[1], v[2]
+                );
+            }
+        }
+    }
+    cracked
+}
+
 #[test]
 fn test08_a_finely_tessellated_occluder_does_not_leak_light() {
     // A window texel names the patch seen through its centre, and V tests the segment from
@@ -365,27 +391,7 @@ fn test08_a_finely_tessellated_occluder_does_not_leak_light() {
     let smooth = format!(
         "{head}[[shapes]]\ntype = \"quad\"\nvertices = [[-0.3, 0.8, -0.3], [-0.3, 0.8, 0.3], [0.3, 0.8, 0.3], [0.3, 0.8, -0.3]]\nmaterial = \"grey\"\ntwo_sided = true\n"
     );
-    // The cracked square: 20 x 20 cells of two triangles each (smaller than patch_size, so
-    // that each is one patch), every triangle shrunk by 1e-5 toward its centre.
-    let mut cracked = head.to_string();
-    let corner = |i: usize, k: usize| [-0.3 + 0.03 * i as f64, 0.8, -0.3 + 0.03 * k as f64];
-    for i in 0..20 {
-        for k in 0..20 {
-            for tri in [
-                [corner(i, k), corner(i, k + 1), corner(i + 1, k + 1)],
-                [corner(i, k), corner(i + 1, k + 1), corner(i + 1, k)],
-            ] {
-                let c: [f64; 3] = std::array::from_fn(|a| tri.iter().map(|v| v[a]).sum::<f64>() / 3.0);
-                let v = tri.map(|v| {
-                    format!("{:?}", std::array::from_fn::<f64, 3, _>(|a| c[a] + (v[a] - c[a]) * (1.0 - 1e-5)))
-                });
-                cracked += &format!(
-                    "[[shapes]]\ntype = \"triangle\"\nvertices = [{}, {}, {}]\nmaterial = \"grey\"\ntwo_sided = true\n",
-                    v[0], v[1], v[2]
-                );
-            }
-        }
-    }
+    let cracked = cracked_square(head);
     let (_scratch, scene) = load("tessellated_occluder", &smooth);
     let (_scratch2, cracked) = load("cracked_occluder", &cracked);
     let Some(ctx) = common::gpu() else { return };
@@ -1095,4 +1101,74 @@ fn test20_a_supersampled_camera_item_buffer_sees_what_a_raster_per_step_sees() {
             );
         }
     }
+}
+
+#[test]
+fn test21_shadow_rays_leave_no_light_in_an_area_lights_umbra() {
+    // A small area light above test08's cracked square: 800 triangles a few texels wide, no
+    // longer one surface for the windows' continuation. The area light's windows, rendered at
+    // each pass's point, leak through it at faces of 64 (the test can fail); shadow rays
+    // through the scene's BVH (the default, docs/ALGORITHM.md 6, "Visibility") meet a
+    // triangle wherever the segment crosses one, so the umbra stays black. The umbra is the
+    // caster's (it shares no code with the renderer): the floor pixels whose 5 x 5 sample
+    // points see none of the light's four corners, which for this convex light and square
+    // puts the whole light behind the square from the whole pixel.
+    use firstshot::direct_light::LightVisibility;
+    let head = "format = 1\n[settings]\npatch_size = 0.06\nhemicube_resolution = 128\n\
+        [materials.grey]\ntype = \"diffuse\"\nalbedo = [0.6, 0.6, 0.6]\n\
+        [[shapes]]\ntype = \"quad\"\nvertices = [[-1.0, 0.0, -1.0], [-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0]]\nmaterial = \"grey\"\n\
+        [camera]\nposition = [0.05, 3.0, 0.02]\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 0.0, 1.0]\nfov_y = 40.0\nwidth = 40\nheight = 40\n\
+        [[lights]]\ntype = \"area\"\nvertices = [[-0.05, 1.8, -0.05], [0.05, 1.8, -0.05], [0.05, 1.8, 0.05], [-0.05, 1.8, 0.05]]\n\
+        radiance = [400.0, 400.0, 400.0]\nsubdivisions = 1\n";
+    let (_scratch, scene) = load("rays_cracked_occluder", &cracked_square(head));
+    let Some(ctx) = common::gpu() else { return };
+    let caster = Caster::new(&scene);
+    let Light::Area { vertices, radiance, .. } = scene.lights[0] else { unreachable!() };
+    let normal = (vertices[1] - vertices[0]).cross(vertices[3] - vertices[0]).normalize();
+    let corners: Vec<_> = vertices.iter().map(|&v| (v, Some(normal), radiance[0] as f64 * 0.01 / 4.0)).collect();
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let (mut umbra, mut sunny, mut lit) = (Vec::new(), Vec::new(), 0.0f64);
+    for py in 0..h {
+        for px in 0..w {
+            let (mut all_dark, mut all_lit, mut on_floor) = (true, true, true);
+            for k in 0..25 {
+                let (sx, sy) = ((k % 5) as f64 * 0.25, (k / 5) as f64 * 0.25);
+                let (o, d) = camera_ray(&scene.camera, w, h, px as f64 + sx, py as f64 + sy);
+                let (value, tri, seen) = direct_along(&caster, o, d, &corners);
+                on_floor &= tri.is_some_and(|i| caster.tris[i].n.y > 0.5 && caster.tris[i].v[0].y < 0.1);
+                all_dark &= seen == 0;
+                all_lit &= seen == corners.len();
+                lit = lit.max(value);
+            }
+            if on_floor && all_dark {
+                umbra.push((px, py));
+            }
+            if on_floor && all_lit {
+                sunny.push((px, py));
+            }
+        }
+    }
+    assert!(umbra.len() > 40, "the square must cast an umbra on the floor ({} pixels)", umbra.len());
+    let patches = scene::tessellate(&scene, scene.settings.patch_size).unwrap();
+    let leaked = |visibility: LightVisibility, shadow_resolution: Option<u32>| {
+        let mut options = RenderOptions::from_scene(&scene);
+        (options.iterations, options.direct_passes) = (0, 16);
+        (options.light_visibility, options.shadow_resolution) = (visibility, shadow_resolution);
+        let rendered = render(&ctx, &scene, &patches, &options).unwrap();
+        assert_eq!(rendered.stats.light_visibility, visibility.name());
+        let leaks = umbra.iter().filter(|&&(px, py)| rendered.image.at(px, py)[0] as f64 > 1e-3 * lit).count();
+        let mean_lit = sunny.iter().map(|&(px, py)| rendered.image.at(px, py)[0] as f64).sum::<f64>() / sunny.len() as f64;
+        (leaks, mean_lit)
+    };
+    let (windows, windows_mean) = leaked(LightVisibility::Windows, Some(64));
+    let (rays, rays_mean) = leaked(LightVisibility::Rays, None);
+    eprintln!(
+        "{} umbra pixels lit by leaks: windows of 64 {windows}, shadow rays {rays} (fully lit means {windows_mean:.4}, {rays_mean:.4})",
+        umbra.len()
+    );
+    assert!(windows * 10 > umbra.len(), "the windows of 64 should leak here: {windows} of {}", umbra.len());
+    assert_eq!(rays, 0, "shadow rays leaked light into {rays} of {} umbra pixels", umbra.len());
+    // Where the floor sees the whole light, both see the same light.
+    assert!(sunny.len() > 400, "{} fully lit floor pixels", sunny.len());
+    assert!((rays_mean / windows_mean - 1.0).abs() < 0.01, "fully lit means {rays_mean} and {windows_mean}");
 }
