@@ -142,6 +142,8 @@ pub struct DirectLights {
     /// The shadow rays' BVH (`shadow_bvh`): one zeroed entry each where unused.
     shadow_nodes: wgpu::Buffer,
     shadow_triangles: wgpu::Buffer,
+    /// `ShadowBvh::frame` of the tree in `shadow_nodes` (none: the identity).
+    shadow_frame: (glam::Vec3, f32),
     pub shadow_bvh_bytes: u64,
 }
 
@@ -515,6 +517,7 @@ impl DirectLights {
             visibility: if rays { LightVisibility::Rays } else { LightVisibility::Windows },
             shadow_nodes,
             shadow_triangles,
+            shadow_frame: bvh.as_ref().map_or((glam::Vec3::ZERO, 1.0), |b| b.frame),
             shadow_bvh_bytes: bvh.as_ref().map_or(0, |b| b.bytes()),
         };
         let kept_faces = out.faces_in(KEPT);
@@ -541,18 +544,25 @@ impl DirectLights {
     /// `1 << faces`) and the atlases their faces lie in (bit `1 << KEPT`, `1 << PER_PASS`),
     /// so that the kernel is compiled without the others' code. An empty table keeps the
     /// defaults (every kind): nothing is evaluated then.
-    pub fn specialization(&self) -> [(&'static str, f64); 4] {
+    pub fn specialization(&self) -> [(&'static str, f64); 8] {
         let bit = |n: u32| 1u32.checked_shl(n).unwrap_or(u32::MAX);
         let kinds = self.table.iter().fold(0u32, |bits, l| bits | bit(l.kind));
         let faces = self.table.iter().fold(0u32, |bits, l| bits | bit(l.faces));
         let atlases = self.faces.iter().fold(0u32, |bits, f| bits | bit(f.tile[3]));
         let rays = ("SHADOW_RAYS", f64::from(u8::from(self.visibility == LightVisibility::Rays)));
-        match self.table.is_empty() {
-            true => [("LIGHT_KINDS", u32::MAX as f64), ("WINDOW_FACE_COUNTS", u32::MAX as f64), ("ATLASES", 3.0), rays],
-            false => {
-                [("LIGHT_KINDS", kinds as f64), ("WINDOW_FACE_COUNTS", faces as f64), ("ATLASES", atlases as f64), rays]
-            }
-        }
+        let (centre, scale) = self.shadow_frame;
+        let frame = [
+            ("SHADOW_FRAME_X", f64::from(centre.x)),
+            ("SHADOW_FRAME_Y", f64::from(centre.y)),
+            ("SHADOW_FRAME_Z", f64::from(centre.z)),
+            ("SHADOW_FRAME_SCALE", f64::from(scale)),
+        ];
+        let (kinds, faces, atlases) = match self.table.is_empty() {
+            true => (u32::MAX as f64, u32::MAX as f64, 3.0),
+            false => (kinds as f64, faces as f64, atlases as f64),
+        };
+        let [fx, fy, fz, fs] = frame;
+        [("LIGHT_KINDS", kinds), ("WINDOW_FACE_COUNTS", faces), ("ATLASES", atlases), rays, fx, fy, fz, fs]
     }
 
     /// Whether a pass must render windows of its own (the scene has first-shot area lights).

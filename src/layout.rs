@@ -294,17 +294,17 @@ pub struct GpuWindowFace {
     pub tile: [u32; 4],
 }
 
-/// A node of the shadow rays' BVH (`shadow_bvh`), in depth-first order: its box, the node to
-/// go on with where a segment misses it or after its triangles (`escape`), and `leaf`:
-/// `shadow_bvh::INNER` for an inner node (its first child is the next node), else its first
-/// triangle << `LEAF_COUNT_BITS` | (its triangle count - 1). WGSL: `BvhNode`.
+/// A node of the shadow rays' BVH (`shadow_bvh`), in depth-first order, 16 bytes: its box as
+/// six half floats in the tree's frame (`ShadowBvh::frame`; min x y, min z max x, max y z,
+/// each pair as WGSL's `pack2x16float`), and `link`: for an inner node, whose first child is
+/// the next node, the node to go on with where a segment misses its box (its escape); for a
+/// leaf, whose escape is always the next node, `shadow_bvh::LEAF` | its first triangle <<
+/// `LEAF_COUNT_BITS` | (its triangle count - 1). WGSL: `BvhNode`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
 pub struct GpuBvhNode {
-    pub min: [f32; 3],
-    pub escape: u32,
-    pub max: [f32; 3],
-    pub leaf: u32,
+    pub bounds: [u32; 3],
+    pub link: u32,
 }
 
 /// A triangle of the shadow rays' BVH, as the segment test wants it: a corner and the two
@@ -452,7 +452,7 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuEstimateParams => "EstimateParams" { environment, patch_count, light_count, mis, first_row }),
         layout!(GpuDirectLight => "DirectLight" { position, normal, strength, cone, kind, first_face, faces }),
         layout!(GpuWindowFace => "WindowFace" { view, tile }),
-        layout!(GpuBvhNode => "BvhNode" { min, escape, max, leaf }),
+        layout!(GpuBvhNode => "BvhNode" { bounds, link }),
         layout!(GpuBvhTriangle => "BvhTriangle" { v0, e1, e2 }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
         layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
@@ -496,12 +496,12 @@ pub fn wgsl_constants() -> String {
          const PREFIX_SUM_PER_THREAD: u32 = {PREFIX_SUM_PER_THREAD}u;\n\
          const FIRST_SHOT_RUN: u32 = {FIRST_SHOT_RUN}u;\n\
          const GLOSSY_HISTORY: u32 = {GLOSSY_HISTORY}u;\n\
-         const SHADOW_INNER: u32 = {SHADOW_INNER}u;\n\
+         const SHADOW_LEAF: u32 = {SHADOW_LEAF}u;\n\
          const SHADOW_LEAF_COUNT_BITS: u32 = {SHADOW_LEAF_COUNT_BITS}u;\n\
          const PI: f32 = {pi:?};\n\
          const FIXED_POINT_SCALE: f32 = {scale:?};\n\
          const SMOOTH_EDGE_COS: f32 = {smooth:?};\n",
-        SHADOW_INNER = crate::shadow_bvh::INNER,
+        SHADOW_LEAF = crate::shadow_bvh::LEAF,
         SHADOW_LEAF_COUNT_BITS = crate::shadow_bvh::LEAF_COUNT_BITS,
         pi = std::f32::consts::PI,
         scale = FIXED_POINT_SCALE,

@@ -179,13 +179,13 @@ pub fn predict(
     let shadow_texels =
         crate::direct_light::SHADOW_TEXEL_BUDGET.min(face * (6 * scene.lights.len() as u64 + 10 * suns));
     // The shadow rays' BVH (`shadow_bvh`), where area lights or emitting shapes take rays: a
-    // triangle (48 bytes) and at most two nodes (32 bytes each) a rasterised triangle. The
+    // triangle (48 bytes) and at most two nodes (16 bytes each) a rasterised triangle. The
     // windows' texels above stay counted: a BVH that does not fit falls back to them.
     let moving_lights =
         scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Area { .. })) || !patches.emitters.is_empty();
     let shadow_bvh_bytes = match options.light_visibility {
         crate::direct_light::LightVisibility::Rays if options.first_shot && moving_lights => {
-            crate::gpu::scene_buffers::raster_triangle_count(patches) * (48 + 2 * 32)
+            crate::gpu::scene_buffers::raster_triangle_count(patches) * (48 + 2 * 16)
         }
         _ => 0,
     };

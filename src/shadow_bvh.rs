@@ -33,6 +33,10 @@ pub struct ShadowBvh {
     pub triangles: Vec<GpuBvhTriangle>,
     /// Nodes on the longest path from the root to a leaf.
     pub depth: u32,
+    /// The frame the nodes' boxes are kept in: (p - centre) * scale, centre the triangles'
+    /// bounding box's centre and scale the inverse of its half diagonal, so that every
+    /// corner lies within [-1, 1], where half floats resolve 2^-11.
+    pub frame: (Vec3, f32),
 }
 
 impl ShadowBvh {
@@ -66,8 +70,12 @@ impl ShadowBvh {
                 GpuBvhTriangle { v0: v4(v0), e1: v4(v1 - v0), e2: v4(v2 - v0) }
             })
             .collect();
-        let (nodes, depth) = threaded(&bvh.nodes);
-        Some(ShadowBvh { nodes, triangles: ordered, depth })
+        let root = bvh.nodes[0].aabb;
+        let centre = Vec3::from((root.min + root.max) * 0.5);
+        let half_diagonal = Vec3::from(root.max - root.min).length() * 0.5;
+        let frame = (centre, if half_diagonal > 0.0 { 1.0 / half_diagonal } else { 1.0 });
+        let (nodes, depth) = threaded(&bvh.nodes, frame);
+        Some(ShadowBvh { nodes, triangles: ordered, depth, frame })
     }
 
     /// Bytes of both tables on the device.
@@ -82,37 +90,42 @@ impl ShadowBvh {
         self.occluded_counted(y, x).0
     }
 
+    /// `occluded`, with the nodes it visited and the triangles it tested.
     pub fn occluded_counted(&self, y: Vec3, x: Vec3) -> (bool, u64, u64) {
         let (mut visited, mut tested) = (0u64, 0u64);
         let dir = x - y;
-        let inv = safe_inverse(dir);
+        let (centre, scale) = self.frame;
+        let origin = (y - centre) * scale;
+        let inv = safe_inverse(dir * scale);
         let mut node = 0usize;
         while node < self.nodes.len() {
             let n = &self.nodes[node];
             visited += 1;
-            let (t_near, t_far) = slab(Vec3::from(n.min), Vec3::from(n.max), y, inv);
+            let (min, max) = unpack_bounds(n.bounds);
+            let (t_near, t_far) = slab(min, max, origin, inv);
+            let leaf = n.link & LEAF != 0;
             if t_near <= t_far {
-                if n.leaf == INNER {
+                if !leaf {
                     node += 1;
                     continue;
                 }
-                let first = n.leaf >> LEAF_COUNT_BITS;
-                for k in first..=first + (n.leaf & LEAF_COUNT_MASK) {
+                let first = (n.link & !LEAF) >> LEAF_COUNT_BITS;
+                for k in first..=first + (n.link & LEAF_COUNT_MASK) {
                     tested += 1;
                     if segment_hits(&self.triangles[k as usize], y, dir) {
                         return (true, visited, tested);
                     }
                 }
             }
-            node = n.escape as usize;
+            node = if leaf { node + 1 } else { n.link as usize };
         }
         (false, visited, tested)
     }
 }
 
-/// `GpuBvhNode::leaf` of an inner node.
-pub const INNER: u32 = u32::MAX;
-/// A leaf's `GpuBvhNode::leaf`: its first triangle << LEAF_COUNT_BITS | (its count - 1).
+/// `GpuBvhNode::link` of a leaf: this bit, its first triangle << LEAF_COUNT_BITS and its count
+/// - 1 (obvhs makes leaves of at most 8).
+pub const LEAF: u32 = 1 << 31;
 pub const LEAF_COUNT_BITS: u32 = 4;
 pub const LEAF_COUNT_MASK: u32 = (1 << LEAF_COUNT_BITS) - 1;
 
@@ -122,7 +135,7 @@ pub const LEAF_COUNT_MASK: u32 = (1 << LEAF_COUNT_BITS) - 1;
 /// first child is the next node. So the kernel walks the tree without a stack, which a CPU
 /// adapter keeps in registers only by selecting among all its entries at every push and
 /// pop. Returns the nodes and the tree's depth.
-fn threaded(tree: &[obvhs::bvh2::node::Bvh2Node]) -> (Vec<GpuBvhNode>, u32) {
+fn threaded(tree: &[obvhs::bvh2::node::Bvh2Node], frame: (Vec3, f32)) -> (Vec<GpuBvhNode>, u32) {
     let mut out: Vec<GpuBvhNode> = Vec::with_capacity(tree.len());
     let mut depth = 0;
     // Preorder, (tree node, its depth), with an explicit stack: the right child pushed first.
@@ -153,15 +166,54 @@ fn threaded(tree: &[obvhs::bvh2::node::Bvh2Node]) -> (Vec<GpuBvhNode>, u32) {
     }
     for (i, &(t, _)) in order.iter().enumerate() {
         let n = &tree[t];
-        let leaf = if n.prim_count == 0 {
-            INNER
+        let link = if n.prim_count == 0 {
+            escape[i]
         } else {
-            assert!(n.prim_count <= LEAF_COUNT_MASK + 1 && n.first_index < INNER >> LEAF_COUNT_BITS);
-            n.first_index << LEAF_COUNT_BITS | (n.prim_count - 1)
+            // A leaf's escape is the next node in depth-first order.
+            debug_assert_eq!(escape[i], i as u32 + 1);
+            assert!(n.prim_count <= LEAF_COUNT_MASK + 1 && n.first_index < (!LEAF) >> LEAF_COUNT_BITS);
+            LEAF | n.first_index << LEAF_COUNT_BITS | (n.prim_count - 1)
         };
-        out.push(GpuBvhNode { min: n.aabb.min.to_array(), escape: escape[i], max: n.aabb.max.to_array(), leaf });
+        let bounds = pack_bounds(Vec3::from(n.aabb.min), Vec3::from(n.aabb.max), frame);
+        out.push(GpuBvhNode { bounds, link });
     }
     (out, depth)
+}
+
+/// A box in the frame as six half floats, each corner rounded outward (the box only grows).
+fn pack_bounds(min: Vec3, max: Vec3, (centre, scale): (Vec3, f32)) -> [u32; 3] {
+    let lo = ((min - centre) * scale).to_array().map(half_down);
+    let hi = ((max - centre) * scale).to_array().map(half_up);
+    let pair = |a: half::f16, b: half::f16| u32::from(a.to_bits()) | u32::from(b.to_bits()) << 16;
+    [pair(lo[0], lo[1]), pair(lo[2], hi[0]), pair(hi[1], hi[2])]
+}
+
+/// The box of `pack_bounds`, as the kernel's `unpack2x16float` reads it.
+fn unpack_bounds(bounds: [u32; 3]) -> (Vec3, Vec3) {
+    let h = |word: u32, high: bool| half::f16::from_bits((if high { word >> 16 } else { word }) as u16).to_f32();
+    let [a, b, c] = bounds;
+    (Vec3::new(h(a, false), h(a, true), h(b, false)), Vec3::new(h(b, true), h(c, false), h(c, true)))
+}
+
+/// The largest half float at most `v`.
+fn half_down(v: f32) -> half::f16 {
+    let h = half::f16::from_f32(v);
+    if h.to_f32() <= v {
+        return h;
+    }
+    // One step toward minus infinity: the magnitude shrinks for a positive value (zero
+    // becomes the smallest negative one) and grows for a negative one.
+    let bits = h.to_bits();
+    half::f16::from_bits(match bits {
+        0 => 0x8001,
+        b if b & 0x8000 == 0 => b - 1,
+        b => b + 1,
+    })
+}
+
+/// The smallest half float at least `v`.
+fn half_up(v: f32) -> half::f16 {
+    -half_down(-v)
 }
 
 fn same_corners(a: &[Vec3A; 3], b: &[Vec3A; 3]) -> bool {
@@ -293,6 +345,22 @@ mod tests {
         assert!(!bvh.occluded(light, Vec3::new(0.3, 0.0, -0.4)), "a point on the floor sees the light");
         assert!(bvh.occluded(light, Vec3::new(0.3, -1.0, -0.4)), "a point below the floor does not");
         assert!(!bvh.occluded(light, Vec3::new(3.0, -1.0, 0.0)), "beside the floor it does");
+    }
+
+    #[test]
+    fn test04_half_float_boxes_only_grow() {
+        let mut rng = crate::rng::StepRng::new(5, 0);
+        for _ in 0..10_000 {
+            let v = ((rng.uniform() - 0.5) * 2.5) as f32 * 10f32.powi((rng.uniform() * 6.0) as i32 - 5);
+            let (down, up) = (half_down(v).to_f32(), half_up(v).to_f32());
+            assert!(down <= v && v <= up, "{down} <= {v} <= {up}");
+            assert!(up - down <= v.abs() * 2e-3 + 1e-7, "{down} .. {up} around {v}");
+        }
+        assert!(half_down(0.0).to_f32() <= 0.0 && half_up(0.0).to_f32() >= 0.0);
+        let (min, max) = (Vec3::new(-1.0, 0.25, 3.0), Vec3::new(2.0, 0.5, 7.5));
+        let (lo, hi) = unpack_bounds(pack_bounds(min, max, (Vec3::new(0.5, 0.0, 5.0), 0.2)));
+        let frame = |p: Vec3| (p - Vec3::new(0.5, 0.0, 5.0)) * 0.2;
+        assert!(lo.cmple(frame(min)).all() && hi.cmpge(frame(max)).all(), "{lo} {hi}");
     }
 
     #[test]

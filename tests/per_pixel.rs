@@ -1157,7 +1157,8 @@ fn test21_shadow_rays_leave_no_light_in_an_area_lights_umbra() {
         let rendered = render(&ctx, &scene, &patches, &options).unwrap();
         assert_eq!(rendered.stats.light_visibility, visibility.name());
         let leaks = umbra.iter().filter(|&&(px, py)| rendered.image.at(px, py)[0] as f64 > 1e-3 * lit).count();
-        let mean_lit = sunny.iter().map(|&(px, py)| rendered.image.at(px, py)[0] as f64).sum::<f64>() / sunny.len() as f64;
+        let mean_lit =
+            sunny.iter().map(|&(px, py)| rendered.image.at(px, py)[0] as f64).sum::<f64>() / sunny.len() as f64;
         (leaks, mean_lit)
     };
     let (windows, windows_mean) = leaked(LightVisibility::Windows, Some(64));

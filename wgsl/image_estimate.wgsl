@@ -108,6 +108,11 @@ override MIS: bool = true;
 // the scene's BVH (`shadow_bvh`, `occluded`) instead of their windows: their table entries
 // then have no faces.
 override SHADOW_RAYS: bool = false;
+// The frame of the shadow BVH's boxes (`ShadowBvh::frame`): p -> (p - centre) * scale.
+override SHADOW_FRAME_X: f32 = 0.0;
+override SHADOW_FRAME_Y: f32 = 0.0;
+override SHADOW_FRAME_Z: f32 = 0.0;
+override SHADOW_FRAME_SCALE: f32 = 1.0;
 
 fn has_light(kind: u32) -> bool {
     return (LIGHT_KINDS & (1u << kind)) != 0u;
@@ -187,36 +192,44 @@ fn shadow_triangle_hit(k: u32, y: vec3<f32>, dir: vec3<f32>) -> bool {
 // Whether some triangle of the scene crosses the segment from y to x, its ends left out: a
 // shadow ray through the BVH (`shadow_bvh::ShadowBvh::occluded` is the same walk on the host).
 // The nodes are in depth-first order with escapes, so the walk needs no stack (a CPU adapter
-// keeps a per-lane stack by selecting among all its entries at every push and pop). Any
+// keeps a per-lane stack by selecting among all its entries at every push and pop), and
+// their boxes are half floats in the tree's frame (SHADOW_FRAME_*), four words a node. Any
 // hit ends it. Only the kept part of the segment enters a box: a box that holds an end alone
 // (the light's own triangles, x's own surface) is skipped.
 fn occluded(y: vec3<f32>, x: vec3<f32>) -> bool {
     let dir = x - y;
-    let inv = 1.0 / select(dir, vec3<f32>(1e-30), abs(dir) < vec3<f32>(1e-30));
+    let origin = (y - vec3<f32>(SHADOW_FRAME_X, SHADOW_FRAME_Y, SHADOW_FRAME_Z)) * SHADOW_FRAME_SCALE;
+    let scaled = dir * SHADOW_FRAME_SCALE;
+    let inv = 1.0 / select(scaled, vec3<f32>(1e-30), abs(scaled) < vec3<f32>(1e-30));
     let end = arrayLength(&shadow_nodes);
     var node = 0u;
     while (node < end) {
-        let t0 = (shadow_nodes[node].min - y) * inv;
-        let t1 = (shadow_nodes[node].max - y) * inv;
+        let bounds = shadow_nodes[node].bounds;
+        let a = unpack2x16float(bounds.x);
+        let b = unpack2x16float(bounds.y);
+        let c = unpack2x16float(bounds.z);
+        let t0 = (vec3<f32>(a, b.x) - origin) * inv;
+        let t1 = (vec3<f32>(b.y, c) - origin) * inv;
         let lo = min(t0, t1);
         let hi = max(t0, t1);
         let near = max(max(lo.x, lo.y), max(lo.z, SEGMENT_EPSILON));
         let far = min(min(hi.x, hi.y), min(hi.z, 1.0 - SEGMENT_EPSILON));
-        let leaf = shadow_nodes[node].leaf;
+        let link = shadow_nodes[node].link;
+        let leaf = (link & SHADOW_LEAF) != 0u;
         if (near <= far) {
-            if (leaf == SHADOW_INNER) {
+            if (!leaf) {
                 node++;
                 continue;
             }
-            let first = leaf >> SHADOW_LEAF_COUNT_BITS;
-            let last = first + (leaf & ((1u << SHADOW_LEAF_COUNT_BITS) - 1u));
+            let first = (link & ~SHADOW_LEAF) >> SHADOW_LEAF_COUNT_BITS;
+            let last = first + (link & ((1u << SHADOW_LEAF_COUNT_BITS) - 1u));
             for (var k = first; k <= last; k++) {
                 if (shadow_triangle_hit(k, y, dir)) {
                     return true;
                 }
             }
         }
-        node = shadow_nodes[node].escape;
+        node = select(link, node + 1u, leaf);
     }
     return false;
 }

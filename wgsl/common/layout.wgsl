@@ -141,14 +141,13 @@ struct WindowFace {
     tile: vec4<u32>,     // xy top-left texel in the atlas, z rows inside the window
 }
 
-// A node of the shadow rays' BVH in depth-first order (Rust: GpuBvhNode): escape the node
-// after its subtree; leaf SHADOW_INNER for an inner node (its first child is the next node),
-// else first triangle << SHADOW_LEAF_COUNT_BITS | (count - 1).
+// A node of the shadow rays' BVH in depth-first order (Rust: GpuBvhNode): its box as six
+// half floats in the tree's frame (min x y, min z max x, max y z); link: an inner node's
+// escape (its first child is the next node), or SHADOW_LEAF | first triangle <<
+// SHADOW_LEAF_COUNT_BITS | (count - 1) for a leaf (whose escape is the next node).
 struct BvhNode {
-    min: vec3<f32>,
-    escape: u32,
-    max: vec3<f32>,
-    leaf: u32,
+    bounds: vec3<u32>,
+    link: u32,
 }
 
 // A triangle of the shadow rays' BVH (Rust: GpuBvhTriangle): a corner and its two edges.
