@@ -17,8 +17,9 @@ pub const SPEC: KernelSpec = KernelSpec {
 
 /// Pipeline and targets of one atlas of window faces.
 pub struct WindowAtlas {
-    pipeline: wgpu::RenderPipeline,
-    bind_group: wgpu::BindGroup,
+    /// None for an atlas without faces (every light of its kind takes shadow rays, or there is
+    /// none): nothing is ever drawn into it, so its pipeline is not built.
+    drawn: Option<(wgpu::RenderPipeline, wgpu::BindGroup)>,
     ids_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     pub size: [u32; 2],
@@ -27,9 +28,12 @@ pub struct WindowAtlas {
 impl WindowAtlas {
     /// An atlas of `size` texels whose faces are entries of `faces` (array<WindowFace>).
     pub fn new(device: &wgpu::Device, label: &str, faces: &wgpu::Buffer, size: [u32; 2]) -> Self {
-        let built = SPEC.build(device);
-        let pipeline = item_pipeline(device, &built, "firstshot.light_window.pipeline");
-        let bind_group = built.bind_group(device, 0, &[("faces", faces.into())]);
+        let drawn = (size[0] > 0 && size[1] > 0).then(|| {
+            let built = SPEC.build(device);
+            let pipeline = item_pipeline(device, &built, "firstshot.light_window.pipeline");
+            let bind_group = built.bind_group(device, 0, &[("faces", faces.into())]);
+            (pipeline, bind_group)
+        });
         let texture = |format, usage, what: &str| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(&format!("firstshot.light_window.{label}.{what}")),
@@ -46,8 +50,7 @@ impl WindowAtlas {
             texture(ID_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING, "ids");
         let depth = texture(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT, "depth");
         WindowAtlas {
-            pipeline,
-            bind_group,
+            drawn,
             ids_view: ids.create_view(&Default::default()),
             depth_view: depth.create_view(&Default::default()),
             size,
@@ -63,9 +66,13 @@ impl WindowAtlas {
     /// `faces` (index into the face table, and the face): one draw per face, the viewport on
     /// its tile, the scissor on its rows.
     pub fn record(&self, encoder: &mut wgpu::CommandEncoder, raster: &RasterMesh, faces: &[(u32, GpuWindowFace)]) {
+        let Some((pipeline, bind_group)) = &self.drawn else {
+            assert!(faces.is_empty(), "an atlas of no texels has no faces to draw");
+            return;
+        };
         let mut pass = begin_item_pass(encoder, "firstshot.light_window.pass", &self.ids_view, &self.depth_view);
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
         for (index, face) in faces {
             let [x, y, rows, _] = face.tile;
             let side = face.view.size[0];
