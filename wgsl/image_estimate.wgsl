@@ -136,13 +136,9 @@ const SEGMENT_EPSILON: f32 = 1e-4;
 // (`crosses_surface`).
 const CONTINUATION_TEXELS: f32 = 1.5;
 
-// Whether the segment y + t (x - y), SEGMENT_EPSILON < t < 1 - SEGMENT_EPSILON, crosses
-// patch k (Moller-Trumbore, either side).
-fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
-    let a = patches_at(k).v0.xyz;
-    let e1 = patches_at(k).v1.xyz - a;
-    let e2 = patches_at(k).v2.xyz - a;
-    let dir = x - y;
+// Whether the segment y + t dir, SEGMENT_EPSILON < t < 1 - SEGMENT_EPSILON, crosses the triangle
+// with corner a and edges e1, e2 (Moller-Trumbore, either side).
+fn segment_crosses(a: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, y: vec3<f32>, dir: vec3<f32>) -> bool {
     let p = cross(dir, e2);
     let det = dot(e1, p);
     if (abs(det) < 1e-30) {
@@ -163,30 +159,15 @@ fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
     return t > SEGMENT_EPSILON && t < 1.0 - SEGMENT_EPSILON;
 }
 
-// Whether the segment y + t dir, SEGMENT_EPSILON < t < 1 - SEGMENT_EPSILON, crosses triangle
-// k of the shadow rays' BVH (Moller-Trumbore, either side).
+// Whether the segment from y to x (its ends left out) crosses patch k.
+fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
+    let a = patches_at(k).v0.xyz;
+    return segment_crosses(a, patches_at(k).v1.xyz - a, patches_at(k).v2.xyz - a, y, x - y);
+}
+
+// Whether the segment y + t dir (its ends left out) crosses triangle k of the shadow rays' BVH.
 fn shadow_triangle_hit(k: u32, y: vec3<f32>, dir: vec3<f32>) -> bool {
-    let a = shadow_triangles[k].v0.xyz;
-    let e1 = shadow_triangles[k].e1.xyz;
-    let e2 = shadow_triangles[k].e2.xyz;
-    let p = cross(dir, e2);
-    let det = dot(e1, p);
-    if (abs(det) < 1e-30) {
-        return false;
-    }
-    let inv = 1.0 / det;
-    let s = y - a;
-    let u = dot(s, p) * inv;
-    if (u < 0.0 || u > 1.0) {
-        return false;
-    }
-    let q = cross(s, e1);
-    let v = dot(dir, q) * inv;
-    if (v < 0.0 || u + v > 1.0) {
-        return false;
-    }
-    let t = dot(e2, q) * inv;
-    return t > SEGMENT_EPSILON && t < 1.0 - SEGMENT_EPSILON;
+    return segment_crosses(shadow_triangles[k].v0.xyz, shadow_triangles[k].e1.xyz, shadow_triangles[k].e2.xyz, y, dir);
 }
 
 // Whether some triangle of the scene crosses the segment from y to x, its ends left out: a
