@@ -181,6 +181,7 @@ fn threaded(tree: &[obvhs::bvh2::node::Bvh2Node], frame: (Vec3, f32)) -> (Vec<Gp
 }
 
 /// A box in the frame as six half floats, each corner rounded outward (the box only grows).
+/// The kernel decodes them by hand (`halves` in image_estimate.wgsl), exactly as `half` does.
 fn pack_bounds(min: Vec3, max: Vec3, (centre, scale): (Vec3, f32)) -> [u32; 3] {
     let lo = ((min - centre) * scale).to_array().map(half_down);
     let hi = ((max - centre) * scale).to_array().map(half_up);
@@ -361,6 +362,28 @@ mod tests {
         let (lo, hi) = unpack_bounds(pack_bounds(min, max, (Vec3::new(0.5, 0.0, 5.0), 0.2)));
         let frame = |p: Vec3| (p - Vec3::new(0.5, 0.0, 5.0)) * 0.2;
         assert!(lo.cmple(frame(min)).all() && hi.cmpge(frame(max)).all(), "{lo} {hi}");
+    }
+
+    /// image_estimate.wgsl's `halves`, step for step.
+    fn kernel_half(bits: u32) -> f32 {
+        let sign = (bits & 0x8000) << 16;
+        let exponent = (bits >> 10) & 0x1f;
+        let mantissa = bits & 0x3ff;
+        if exponent == 0 {
+            return f32::from_bits(sign | (mantissa as f32 * 5.960_464_5e-8).to_bits());
+        }
+        f32::from_bits(sign | (exponent + 112) << 23 | mantissa << 13)
+    }
+
+    #[test]
+    fn test05_the_kernels_half_decoding_is_exact() {
+        // Every finite half, normal and subnormal, both signs.
+        for bits in 0u32..0x10000 {
+            let h = half::f16::from_bits(bits as u16);
+            if h.is_finite() {
+                assert_eq!(kernel_half(bits).to_bits(), h.to_f32().to_bits(), "half bits {bits:#06x}");
+            }
+        }
     }
 
     #[test]

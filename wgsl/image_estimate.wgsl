@@ -170,11 +170,26 @@ fn shadow_triangle_hit(k: u32, y: vec3<f32>, dir: vec3<f32>) -> bool {
     return segment_crosses(shadow_triangles[k].v0.xyz, shadow_triangles[k].e1.xyz, shadow_triangles[k].e2.xyz, y, dir);
 }
 
+// The two half floats of a word (low bits first), decoded by hand: `unpack2x16float` needs a
+// capability (SHADER_FLOAT16_IN_FLOAT32) that the kernels do not ask of a device. Exact for
+// every finite half; the tree's boxes hold no infinity or NaN (they lie within [-1, 1]).
+fn halves(word: u32) -> vec2<f32> {
+    let bits = vec2<u32>(word & 0xffffu, word >> 16u);
+    let sign = (bits & vec2<u32>(0x8000u)) << vec2<u32>(16u);
+    let exponent = (bits >> vec2<u32>(10u)) & vec2<u32>(0x1fu);
+    let mantissa = bits & vec2<u32>(0x3ffu);
+    let normal = bitcast<vec2<f32>>(sign | ((exponent + vec2<u32>(112u)) << vec2<u32>(23u)) | (mantissa << vec2<u32>(13u)));
+    // Subnormal halves (and zero): mantissa x 2^-24.
+    let small = bitcast<vec2<f32>>(sign | bitcast<vec2<u32>>(vec2<f32>(mantissa) * 5.9604645e-8));
+    return select(normal, small, exponent == vec2<u32>(0u));
+}
+
 // Whether some triangle of the scene crosses the segment from y to x, its ends left out: a
 // shadow ray through the BVH (`shadow_bvh::ShadowBvh::occluded` is the same walk on the host).
 // The nodes are in depth-first order with escapes, so the walk needs no stack (a CPU adapter
 // keeps a per-lane stack by selecting among all its entries at every push and pop), and
-// their boxes are half floats in the tree's frame (SHADOW_FRAME_*), four words a node. Any
+// their boxes are half floats in the tree's frame (SHADOW_FRAME_*), four words a node
+// (`halves`). Any
 // hit ends it. Only the kept part of the segment enters a box: a box that holds an end alone
 // (the light's own triangles, x's own surface) is skipped.
 fn occluded(y: vec3<f32>, x: vec3<f32>) -> bool {
@@ -186,9 +201,9 @@ fn occluded(y: vec3<f32>, x: vec3<f32>) -> bool {
     var node = 0u;
     while (node < end) {
         let bounds = shadow_nodes[node].bounds;
-        let a = unpack2x16float(bounds.x);
-        let b = unpack2x16float(bounds.y);
-        let c = unpack2x16float(bounds.z);
+        let a = halves(bounds.x);
+        let b = halves(bounds.y);
+        let c = halves(bounds.z);
         let t0 = (vec3<f32>(a, b.x) - origin) * inv;
         let t1 = (vec3<f32>(b.y, c) - origin) * inv;
         let lo = min(t0, t1);
