@@ -132,9 +132,9 @@ pub const LEAF_COUNT_MASK: u32 = (1 << LEAF_COUNT_BITS) - 1;
 /// obvhs's tree (children side by side at `first_index`) in depth-first order, each node with
 /// its escape: the node to go on with where the segment misses its box, or after its leaf's
 /// triangles (the next subtree to the right; `nodes.len()` past the last). An inner node's
-/// first child is the next node. So the kernel walks the tree without a stack, which a CPU
-/// adapter keeps in registers only by selecting among all its entries at every push and
-/// pop. Returns the nodes and the tree's depth.
+/// first child is the next node. So the kernel walks the tree without a stack: on lavapipe a
+/// per-lane stack of 64 entries in private memory made Sierpinski's direct pass 62.4 ms
+/// against 48.6 ms without one. Returns the nodes and the tree's depth.
 fn threaded(tree: &[obvhs::bvh2::node::Bvh2Node], frame: (Vec3, f32)) -> (Vec<GpuBvhNode>, u32) {
     let mut out: Vec<GpuBvhNode> = Vec::with_capacity(tree.len());
     let mut depth = 0;
