@@ -16,6 +16,8 @@
 #   5. views: --all-cameras with four cameras against one camera, alternated, the gather
 #      fused (the GPU's default) and split
 #   6. scaling: memory and time up to millions of patches and 8K images
+#   7. windows: Sierpinski's stage profile with the area light's windows instead of shadow
+#      rays (--light-visibility windows), against stage 4's, if the budget leaves time
 # FIRSTSHOT_GPU_STAGES="peers views" runs only those (by name or by prefix: peers_sierpinski).
 set -uo pipefail
 budget=${1:-480}
@@ -143,4 +145,9 @@ stage views 150 bash -c views
 stage scaling "${FIRSTSHOT_GPU_SCALING_LIMIT:-120}" $harness scaling --adapters $vk --repeats 1 \
     --patch-sizes "${FIRSTSHOT_GPU_PATCH_SIZES:-0.35,0.1,0.03,0.015,0.0085}" \
     --images "${FIRSTSHOT_GPU_IMAGES:-512x512,2048x2048,7680x4320}" --out "$work/scaling"
+
+# 7. The area light's visibility by windows, for the shadow rays' side by side (stage 4 has
+# the rays, the default).
+stage windows 40 $harness throughput --adapters $vk --repeats 3 --steps 200 --scenes sierpinski \
+    --light-visibility windows --out "$work/throughput_windows"
 log "done"
