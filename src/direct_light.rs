@@ -42,6 +42,19 @@ pub enum LightVisibility {
     Windows,
 }
 
+impl std::str::FromStr for LightVisibility {
+    type Err = String;
+
+    /// `--light-visibility`'s value (the CLI and the harness).
+    fn from_str(value: &str) -> Result<Self, String> {
+        match value {
+            "rays" => Ok(LightVisibility::Rays),
+            "windows" => Ok(LightVisibility::Windows),
+            _ => Err(format!("expected \"rays\" or \"windows\", got {value:?}")),
+        }
+    }
+}
+
 impl LightVisibility {
     pub fn name(self) -> &'static str {
         match self {
@@ -144,7 +157,6 @@ pub struct DirectLights {
     shadow_triangles: wgpu::Buffer,
     /// `ShadowBvh::frame` of the tree in `shadow_nodes` (none: the identity).
     shadow_frame: (glam::Vec3, f32),
-    pub shadow_bvh_bytes: u64,
 }
 
 /// The face side asked of the lights' windows: `options.shadow_resolution`, else
@@ -484,22 +496,13 @@ impl DirectLights {
             buffers::storage_init(device, "firstshot.direct_light.faces", &non_empty(&table_faces), usage);
         let kept = WindowAtlas::new(device, "kept", &faces_buffer, sizes[0]);
         let per_pass = WindowAtlas::new(device, "per_pass", &faces_buffer, sizes[1]);
-        let (nodes, triangles) = match &bvh {
-            Some(b) => (b.nodes.clone(), b.triangles.clone()),
-            None => (Vec::new(), Vec::new()),
-        };
-        let shadow_nodes = buffers::storage_init(
-            device,
-            "firstshot.direct_light.shadow_nodes",
-            &non_empty(&nodes),
-            wgpu::BufferUsages::empty(),
-        );
-        let shadow_triangles = buffers::storage_init(
-            device,
-            "firstshot.direct_light.shadow_triangles",
-            &non_empty(&triangles),
-            wgpu::BufferUsages::empty(),
-        );
+        let none = wgpu::BufferUsages::empty();
+        let nodes = bvh.as_ref().map_or(&[][..], |b| &b.nodes);
+        let shadow_nodes =
+            buffers::storage_init(device, "firstshot.direct_light.shadow_nodes", &non_empty(nodes), none);
+        let triangles = bvh.as_ref().map_or(&[][..], |b| &b.triangles);
+        let shadow_triangles =
+            buffers::storage_init(device, "firstshot.direct_light.shadow_triangles", &non_empty(triangles), none);
         let out = DirectLights {
             lights,
             table,
@@ -518,7 +521,6 @@ impl DirectLights {
             shadow_nodes,
             shadow_triangles,
             shadow_frame: bvh.as_ref().map_or((glam::Vec3::ZERO, 1.0), |b| b.frame),
-            shadow_bvh_bytes: bvh.as_ref().map_or(0, |b| b.bytes()),
         };
         let kept_faces = out.faces_in(KEPT);
         if !kept_faces.is_empty() {
@@ -551,18 +553,20 @@ impl DirectLights {
         let atlases = self.faces.iter().fold(0u32, |bits, f| bits | bit(f.tile[3]));
         let rays = ("SHADOW_RAYS", f64::from(u8::from(self.visibility == LightVisibility::Rays)));
         let (centre, scale) = self.shadow_frame;
-        let frame = [
-            ("SHADOW_FRAME_X", f64::from(centre.x)),
-            ("SHADOW_FRAME_Y", f64::from(centre.y)),
-            ("SHADOW_FRAME_Z", f64::from(centre.z)),
-            ("SHADOW_FRAME_SCALE", f64::from(scale)),
-        ];
         let (kinds, faces, atlases) = match self.table.is_empty() {
             true => (u32::MAX as f64, u32::MAX as f64, 3.0),
             false => (kinds as f64, faces as f64, atlases as f64),
         };
-        let [fx, fy, fz, fs] = frame;
-        [("LIGHT_KINDS", kinds), ("WINDOW_FACE_COUNTS", faces), ("ATLASES", atlases), rays, fx, fy, fz, fs]
+        [
+            ("LIGHT_KINDS", kinds),
+            ("WINDOW_FACE_COUNTS", faces),
+            ("ATLASES", atlases),
+            rays,
+            ("SHADOW_FRAME_X", f64::from(centre.x)),
+            ("SHADOW_FRAME_Y", f64::from(centre.y)),
+            ("SHADOW_FRAME_Z", f64::from(centre.z)),
+            ("SHADOW_FRAME_SCALE", f64::from(scale)),
+        ]
     }
 
     /// Whether a pass must render windows of its own (the scene has first-shot area lights).

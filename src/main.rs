@@ -159,7 +159,7 @@ pub(crate) struct RenderArgs {
     /// scene's triangles (exact), or `windows`, item buffers rendered at every pass's point
     /// (the paper's; exact where an occluder covers a texel centre). Point, spot and
     /// directional lights keep their windows, rendered once
-    #[arg(long, value_name = "rays|windows", value_parser = parse_light_visibility, default_value = "rays")]
+    #[arg(long, value_name = "rays|windows", value_parser = |v: &str| v.parse::<LightVisibility>(), default_value = "rays")]
     light_visibility: LightVisibility,
     /// The camera to render, by name: "camera" for the [camera] table, or a [[cameras]]
     /// entry's name (default: the first of the scene's cameras).
@@ -828,14 +828,6 @@ fn parse_choice(value: &str, choices: &[u32]) -> std::result::Result<Choice, Str
         let listed: Vec<String> = choices.iter().map(u32::to_string).collect();
         format!("expected {} or \"auto\", got {value:?}", listed.join(", "))
     })
-}
-
-fn parse_light_visibility(value: &str) -> std::result::Result<LightVisibility, String> {
-    match value {
-        "rays" => Ok(LightVisibility::Rays),
-        "windows" => Ok(LightVisibility::Windows),
-        _ => Err(format!("expected \"rays\" or \"windows\", got {value:?}")),
-    }
 }
 
 fn parse_gather(value: &str) -> std::result::Result<GatherChoice, String> {

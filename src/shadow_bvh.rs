@@ -13,8 +13,8 @@
 //! `wgsl/image_estimate.wgsl` (`occluded`) walks it.
 //!
 //! The build is obvhs's (the burn-in's random walk casts its rays with it too); this module
-//! flattens its tree into two tables the kernel reads (`GpuBvhNode`, `GpuBvhTriangle`, the
-//! triangles in leaf order) and bounds its depth, which the kernel's stack must hold.
+//! flattens its tree into two tables the kernel reads (`GpuBvhNode`, depth-first with escapes
+//! and half-float boxes; `GpuBvhTriangle`, the triangles in leaf order).
 
 use crate::gpu::scene_buffers::RasterTriangles;
 use crate::layout::{GpuBvhNode, GpuBvhTriangle};
@@ -41,8 +41,7 @@ pub struct ShadowBvh {
 
 impl ShadowBvh {
     /// The hierarchy over `raster`'s triangles (a patch's twin, drawn as a second triangle,
-    /// is left out: it lies in the same plane). `None` for a scene without triangles, or a
-    /// leaf of more triangles than `LEAF_COUNT_MASK + 1` (obvhs makes at most 8).
+    /// is left out: it lies in the same plane). `None` for a scene without triangles.
     pub fn build(raster: &RasterTriangles) -> Option<ShadowBvh> {
         let corner = |v: &crate::layout::RasterVertex| Vec3A::from(Vec3::from(v.position));
         let mut source: Vec<[Vec3A; 3]> = Vec::with_capacity(raster.vertices.len() / 3);
@@ -78,21 +77,9 @@ impl ShadowBvh {
         Some(ShadowBvh { nodes, triangles: ordered, depth, frame })
     }
 
-    /// Bytes of both tables on the device.
-    pub fn bytes(&self) -> u64 {
-        (self.nodes.len() * std::mem::size_of::<GpuBvhNode>()
-            + self.triangles.len() * std::mem::size_of::<GpuBvhTriangle>()) as u64
-    }
-
     /// Whether a triangle crosses the segment from y to x, its ends left out: the kernel's
     /// `occluded`, step for step, on the host (tests hold it against every triangle).
     pub fn occluded(&self, y: Vec3, x: Vec3) -> bool {
-        self.occluded_counted(y, x).0
-    }
-
-    /// `occluded`, with the nodes it visited and the triangles it tested.
-    pub fn occluded_counted(&self, y: Vec3, x: Vec3) -> (bool, u64, u64) {
-        let (mut visited, mut tested) = (0u64, 0u64);
         let dir = x - y;
         let (centre, scale) = self.frame;
         let origin = (y - centre) * scale;
@@ -100,7 +87,6 @@ impl ShadowBvh {
         let mut node = 0usize;
         while node < self.nodes.len() {
             let n = &self.nodes[node];
-            visited += 1;
             let (min, max) = unpack_bounds(n.bounds);
             let (t_near, t_far) = slab(min, max, origin, inv);
             let leaf = n.link & LEAF != 0;
@@ -110,16 +96,15 @@ impl ShadowBvh {
                     continue;
                 }
                 let first = (n.link & !LEAF) >> LEAF_COUNT_BITS;
-                for k in first..=first + (n.link & LEAF_COUNT_MASK) {
-                    tested += 1;
-                    if segment_hits(&self.triangles[k as usize], y, dir) {
-                        return (true, visited, tested);
-                    }
+                if (first..=first + (n.link & LEAF_COUNT_MASK))
+                    .any(|k| segment_hits(&self.triangles[k as usize], y, dir))
+                {
+                    return true;
                 }
             }
             node = if leaf { node + 1 } else { n.link as usize };
         }
-        (false, visited, tested)
+        false
     }
 }
 
@@ -189,7 +174,7 @@ fn pack_bounds(min: Vec3, max: Vec3, (centre, scale): (Vec3, f32)) -> [u32; 3] {
     [pair(lo[0], lo[1]), pair(lo[2], hi[0]), pair(hi[1], hi[2])]
 }
 
-/// The box of `pack_bounds`, as the kernel's `unpack2x16float` reads it.
+/// The box of `pack_bounds`, as the kernel's `halves` reads it.
 fn unpack_bounds(bounds: [u32; 3]) -> (Vec3, Vec3) {
     let h = |word: u32, high: bool| half::f16::from_bits((if high { word >> 16 } else { word }) as u16).to_f32();
     let [a, b, c] = bounds;

@@ -187,11 +187,10 @@ fn halves(word: u32) -> vec2<f32> {
 // Whether some triangle of the scene crosses the segment from y to x, its ends left out: a
 // shadow ray through the BVH (`shadow_bvh::ShadowBvh::occluded` is the same walk on the host).
 // The nodes are in depth-first order with escapes, so the walk needs no stack (on lavapipe a
-// per-lane stack in private memory cost a quarter more), and
-// their boxes are half floats in the tree's frame (SHADOW_FRAME_*), four words a node
-// (`halves`). Any
-// hit ends it. Only the kept part of the segment enters a box: a box that holds an end alone
-// (the light's own triangles, x's own surface) is skipped.
+// per-lane stack in private memory cost a quarter more), and their boxes are half floats in
+// the tree's frame (SHADOW_FRAME_*, `halves`), four words a node. Any hit ends it. Only the
+// kept part of the segment enters a box: a box that holds an end alone (the light's own
+// triangles, x's own surface) is skipped.
 fn occluded(y: vec3<f32>, x: vec3<f32>) -> bool {
     let dir = x - y;
     let origin = (y - vec3<f32>(SHADOW_FRAME_X, SHADOW_FRAME_Y, SHADOW_FRAME_Z)) * SHADOW_FRAME_SCALE;

@@ -476,11 +476,10 @@ fn main() -> ExitCode {
         steps: args.steps.unwrap_or(if quick { 8 } else { 40 }).max(1),
         bundle_resolution: args.bundle_resolution,
         wide_lines: args.wide_lines,
-        light_visibility: match args.light_visibility.as_deref() {
-            None | Some("rays") => firstshot::direct_light::LightVisibility::Rays,
-            Some("windows") => firstshot::direct_light::LightVisibility::Windows,
-            Some(other) => {
-                eprintln!("--light-visibility: expected \"rays\" or \"windows\", got {other:?}");
+        light_visibility: match args.light_visibility.as_deref().map(str::parse).transpose() {
+            Ok(v) => v.unwrap_or_default(),
+            Err(e) => {
+                eprintln!("--light-visibility: {e}");
                 std::process::exit(2);
             }
         },
