@@ -344,6 +344,44 @@ fn test07_an_image_sum_in_bands_of_rows_is_the_same_bits() {
     assert_eq!(whole.image.pixels, banded.image.pixels);
 }
 
+/// What the caster sees of the floor (the up-facing surfaces at y < 0.1) through each pixel's
+/// whole square (25 points: corners, edge midpoints, a 4 x 4 grid), lit by `light_points` (as
+/// `direct_along` takes them): for test08 and test21.
+struct FloorShadow {
+    /// The pixels whose every point lies on the floor and sees none of the light points.
+    umbra: Vec<(u32, u32)>,
+    /// The pixels whose every point lies on the floor and sees all of them.
+    fully_lit: Vec<(u32, u32)>,
+    /// The brightest direct light among all the points.
+    brightest: f64,
+}
+
+fn floor_shadow(caster: &Caster, scene: &Scene, light_points: &[(DVec3, Option<DVec3>, f64)]) -> FloorShadow {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let mut out = FloorShadow { umbra: Vec::new(), fully_lit: Vec::new(), brightest: 0.0 };
+    for py in 0..h {
+        for px in 0..w {
+            let (mut all_dark, mut all_lit, mut on_floor) = (true, true, true);
+            for k in 0..25 {
+                let (sx, sy) = ((k % 5) as f64 * 0.25, (k / 5) as f64 * 0.25);
+                let (o, d) = camera_ray(&scene.camera, w, h, px as f64 + sx, py as f64 + sy);
+                let (value, tri, seen) = direct_along(caster, o, d, light_points);
+                on_floor &= tri.is_some_and(|i| caster.tris[i].n.y > 0.5 && caster.tris[i].v[0].y < 0.1);
+                all_dark &= seen == 0;
+                all_lit &= seen == light_points.len();
+                out.brightest = out.brightest.max(value);
+            }
+            if on_floor && all_dark {
+                out.umbra.push((px, py));
+            }
+            if on_floor && all_lit {
+                out.fully_lit.push((px, py));
+            }
+        }
+    }
+    out
+}
+
 /// `head` and the cracked square of test08 and test21: the square [-0.3, 0.3]^2 at y = 0.8 as
 /// 20 x 20 cells of two triangles each (smaller than patch_size 0.06, so that each is one
 /// patch), every triangle shrunk by 1e-5 toward its centre, two-sided.
@@ -398,29 +436,9 @@ fn test08_a_finely_tessellated_occluder_does_not_leak_light() {
     let caster = Caster::new(&scene);
     let Light::Point { position, power } = scene.lights[0] else { unreachable!() };
     let light = [(position, None, power[0] as f64 / (4.0 * std::f64::consts::PI))];
-    // The floor pixels whose whole square (corners, edge midpoints, a 4 x 4 grid) the caster
-    // finds in the occluder's shadow, and the lit level beside it.
-    let (w, h) = (scene.camera.width, scene.camera.height);
-    let mut umbra = Vec::new();
-    let mut lit = 0.0f64;
-    for py in 0..h {
-        for px in 0..w {
-            let mut all_dark = true;
-            let mut on_floor = true;
-            for k in 0..25 {
-                let (sx, sy) = ((k % 5) as f64 * 0.25, (k / 5) as f64 * 0.25);
-                let (o, d) = camera_ray(&scene.camera, w, h, px as f64 + sx, py as f64 + sy);
-                let (value, tri, _) = direct_along(&caster, o, d, &light);
-                // Up-facing: the floor (the occluder's lit top is never dark).
-                on_floor &= tri.is_some_and(|i| caster.tris[i].n.y > 0.5);
-                all_dark &= value == 0.0;
-                lit = lit.max(value);
-            }
-            if all_dark && on_floor {
-                umbra.push((px, py));
-            }
-        }
-    }
+    // The floor pixels whose whole square the caster finds in the occluder's shadow, and the
+    // lit level beside it.
+    let FloorShadow { umbra, brightest: lit, .. } = floor_shadow(&caster, &scene, &light);
     assert!(umbra.len() > 60, "the occluder must shade a patch of the floor ({} pixels)", umbra.len());
     let leaked = |scene: &Scene, shadow_resolution: Option<u32>| {
         let patches = scene::tessellate(scene, scene.settings.patch_size).unwrap();
@@ -1126,28 +1144,7 @@ fn test21_shadow_rays_leave_no_light_in_an_area_lights_umbra() {
     let Light::Area { vertices, radiance, .. } = scene.lights[0] else { unreachable!() };
     let normal = (vertices[1] - vertices[0]).cross(vertices[3] - vertices[0]).normalize();
     let corners: Vec<_> = vertices.iter().map(|&v| (v, Some(normal), radiance[0] as f64 * 0.01 / 4.0)).collect();
-    let (w, h) = (scene.camera.width, scene.camera.height);
-    let (mut umbra, mut sunny, mut lit) = (Vec::new(), Vec::new(), 0.0f64);
-    for py in 0..h {
-        for px in 0..w {
-            let (mut all_dark, mut all_lit, mut on_floor) = (true, true, true);
-            for k in 0..25 {
-                let (sx, sy) = ((k % 5) as f64 * 0.25, (k / 5) as f64 * 0.25);
-                let (o, d) = camera_ray(&scene.camera, w, h, px as f64 + sx, py as f64 + sy);
-                let (value, tri, seen) = direct_along(&caster, o, d, &corners);
-                on_floor &= tri.is_some_and(|i| caster.tris[i].n.y > 0.5 && caster.tris[i].v[0].y < 0.1);
-                all_dark &= seen == 0;
-                all_lit &= seen == corners.len();
-                lit = lit.max(value);
-            }
-            if on_floor && all_dark {
-                umbra.push((px, py));
-            }
-            if on_floor && all_lit {
-                sunny.push((px, py));
-            }
-        }
-    }
+    let FloorShadow { umbra, fully_lit: sunny, brightest: lit } = floor_shadow(&caster, &scene, &corners);
     assert!(umbra.len() > 40, "the square must cast an umbra on the floor ({} pixels)", umbra.len());
     let patches = scene::tessellate(&scene, scene.settings.patch_size).unwrap();
     let leaked = |visibility: LightVisibility, shadow_resolution: Option<u32>| {
