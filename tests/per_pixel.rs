@@ -344,6 +344,13 @@ fn test07_an_image_sum_in_bands_of_rows_is_the_same_bits() {
     assert_eq!(whole.image.pixels, banded.image.pixels);
 }
 
+/// The scene of test08 and test21 but for its occluder and its light: a grey 2 x 2 floor
+/// at y = 0 seen from above.
+const FLOOR_UNDER_OCCLUDER: &str = "format = 1\n[settings]\npatch_size = 0.06\nhemicube_resolution = 128\n\
+        [materials.grey]\ntype = \"diffuse\"\nalbedo = [0.6, 0.6, 0.6]\n\
+        [[shapes]]\ntype = \"quad\"\nvertices = [[-1.0, 0.0, -1.0], [-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0]]\nmaterial = \"grey\"\n\
+        [camera]\nposition = [0.05, 3.0, 0.02]\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 0.0, 1.0]\nfov_y = 40.0\nwidth = 40\nheight = 40\n";
+
 /// What the caster sees of the floor (the up-facing surfaces at y < 0.1) through each pixel's
 /// whole square (25 points: corners, edge midpoints, a 4 x 4 grid), lit by `light_points` (as
 /// `direct_along` takes them): for test08 and test21.
@@ -421,15 +428,13 @@ fn test08_a_finely_tessellated_occluder_does_not_leak_light() {
     // surface for the test, and no gap any ray could find) shows that the test can fail: it
     // leaks at 64: in all 105 umbra pixels (before the continuation the smooth square leaked
     // in 76 of them at 64, and in none at the automatic 1056).
-    let head = "format = 1\n[settings]\npatch_size = 0.06\nhemicube_resolution = 128\n\
-        [materials.grey]\ntype = \"diffuse\"\nalbedo = [0.6, 0.6, 0.6]\n\
-        [[shapes]]\ntype = \"quad\"\nvertices = [[-1.0, 0.0, -1.0], [-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0]]\nmaterial = \"grey\"\n\
-        [camera]\nposition = [0.05, 3.0, 0.02]\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 0.0, 1.0]\nfov_y = 40.0\nwidth = 40\nheight = 40\n\
-        [[lights]]\ntype = \"point\"\nposition = [0.05, 1.8, -0.04]\npower = [10.0, 10.0, 10.0]\n";
+    let head = format!(
+        "{FLOOR_UNDER_OCCLUDER}[[lights]]\ntype = \"point\"\nposition = [0.05, 1.8, -0.04]\npower = [10.0, 10.0, 10.0]\n"
+    );
     let smooth = format!(
         "{head}[[shapes]]\ntype = \"quad\"\nvertices = [[-0.3, 0.8, -0.3], [-0.3, 0.8, 0.3], [0.3, 0.8, 0.3], [0.3, 0.8, -0.3]]\nmaterial = \"grey\"\ntwo_sided = true\n"
     );
-    let cracked = cracked_square(head);
+    let cracked = cracked_square(&head);
     let (_scratch, scene) = load("tessellated_occluder", &smooth);
     let (_scratch2, cracked) = load("cracked_occluder", &cracked);
     let Some(ctx) = common::gpu() else { return };
@@ -1132,13 +1137,11 @@ fn test21_shadow_rays_leave_no_light_in_an_area_lights_umbra() {
     // points see none of the light's four corners, which for this convex light and square
     // puts the whole light behind the square from the whole pixel.
     use firstshot::direct_light::LightVisibility;
-    let head = "format = 1\n[settings]\npatch_size = 0.06\nhemicube_resolution = 128\n\
-        [materials.grey]\ntype = \"diffuse\"\nalbedo = [0.6, 0.6, 0.6]\n\
-        [[shapes]]\ntype = \"quad\"\nvertices = [[-1.0, 0.0, -1.0], [-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0]]\nmaterial = \"grey\"\n\
-        [camera]\nposition = [0.05, 3.0, 0.02]\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 0.0, 1.0]\nfov_y = 40.0\nwidth = 40\nheight = 40\n\
-        [[lights]]\ntype = \"area\"\nvertices = [[-0.05, 1.8, -0.05], [0.05, 1.8, -0.05], [0.05, 1.8, 0.05], [-0.05, 1.8, 0.05]]\n\
-        radiance = [400.0, 400.0, 400.0]\nsubdivisions = 1\n";
-    let (_scratch, scene) = load("rays_cracked_occluder", &cracked_square(head));
+    let head = format!(
+        "{FLOOR_UNDER_OCCLUDER}[[lights]]\ntype = \"area\"\nvertices = [[-0.05, 1.8, -0.05], [0.05, 1.8, -0.05], [0.05, 1.8, 0.05], [-0.05, 1.8, 0.05]]\n\
+        radiance = [400.0, 400.0, 400.0]\nsubdivisions = 1\n"
+    );
+    let (_scratch, scene) = load("rays_cracked_occluder", &cracked_square(&head));
     let Some(ctx) = common::gpu() else { return };
     let caster = Caster::new(&scene);
     let Light::Area { vertices, radiance, .. } = scene.lights[0] else { unreachable!() };
