@@ -64,6 +64,13 @@ impl LightVisibility {
     }
 }
 
+/// Whether a first-shot light of the scene takes a new point every pass: an area light or an
+/// emitting shape, whose visibility `LightVisibility` chooses (the memory plan asks before any
+/// GPU work, `DirectLights::new` when it builds the BVH).
+pub fn has_moving_lights(scene: &Scene, patches: &Patches) -> bool {
+    scene.lights.iter().any(|l| matches!(l, Light::Area { .. })) || !patches.emitters.is_empty()
+}
+
 /// Texels of both atlases together at most (an id and a depth of 4 bytes each: 256 MiB).
 pub const SHADOW_TEXEL_BUDGET: u64 = 1 << 25;
 /// A directional light's parallel view has this many times the side of a cube face (16 times
@@ -361,9 +368,8 @@ impl DirectLights {
         let max_side = ctx.limits().max_texture_dimension_2d;
         // Shadow rays where asked, where some light moves its point, and where the BVH fits
         // the device's bindings (else the windows, as `--stats` reports).
-        let moving = sources.iter().any(|(source, _)| matches!(source, Source::Area { .. }));
         let bvh = match options.light_visibility {
-            LightVisibility::Rays if moving => {
+            LightVisibility::Rays if first_shot && has_moving_lights(scene, patches) => {
                 let binding = ctx.limits().max_storage_buffer_binding_size;
                 crate::shadow_bvh::ShadowBvh::build(&crate::gpu::scene_buffers::raster_triangles(patches)).filter(|b| {
                     let fits = |len: usize, size: usize| (len * size) as u64 <= binding;

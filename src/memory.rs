@@ -181,10 +181,10 @@ pub fn predict(
     // The shadow rays' BVH (`shadow_bvh`), where area lights or emitting shapes take rays: a
     // triangle (48 bytes) and at most two nodes (16 bytes each) a rasterised triangle. The
     // windows' texels above stay counted: a BVH that does not fit falls back to them.
-    let moving_lights =
-        scene.lights.iter().any(|l| matches!(l, crate::scene::Light::Area { .. })) || !patches.emitters.is_empty();
     let shadow_bvh_bytes = match options.light_visibility {
-        crate::direct_light::LightVisibility::Rays if options.first_shot && moving_lights => {
+        crate::direct_light::LightVisibility::Rays
+            if options.first_shot && crate::direct_light::has_moving_lights(scene, patches) =>
+        {
             crate::gpu::scene_buffers::raster_triangle_count(patches) * (48 + 2 * 16)
         }
         _ => 0,
