@@ -167,6 +167,11 @@ struct Walk<'a> {
     area_cdf: Vec<(f64, u32)>,
     /// How far a ray starts off the surface it leaves, against self-hits.
     offset: f64,
+    /// The scene's centre: the BVH and its rays are in single precision, relative to it
+    /// (`local`), so that their rounding is a share of the scene's size wherever it lies. In
+    /// world coordinates a Cornell box 1e5 mm from the origin lost its rays to self-hits past
+    /// the offset (its measured decay per bounce 0.61 against 0.68, one burn-in step less).
+    centre: DVec3,
 }
 
 impl<'a> Walk<'a> {
@@ -188,13 +193,14 @@ impl<'a> Walk<'a> {
         if area_cdf.is_empty() {
             return None;
         }
+        let (centre, radius) = crate::gpu::scene_buffers::bounding_sphere(patches);
+        let local = |p: DVec3| single(p - centre);
         let triangles: Vec<Triangle> = patches
             .patches
             .iter()
-            .map(|p| Triangle { v0: single(p.vertices[0]), v1: single(p.vertices[1]), v2: single(p.vertices[2]) })
+            .map(|p| Triangle { v0: local(p.vertices[0]), v1: local(p.vertices[1]), v2: local(p.vertices[2]) })
             .collect();
         let bvh = build_bvh2_from_tris(&triangles, BvhBuildParams::fast_build(), &mut Default::default());
-        let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
         let lobe_tables = scene
             .materials
             .iter()
@@ -203,7 +209,7 @@ impl<'a> Walk<'a> {
                 MaterialKind::Phong { shininess, .. } => Some(brdf::glossy_albedo_table(f64::from(shininess))),
             })
             .collect();
-        Some(Walk { scene, patches, triangles, lobe_tables, bvh, area_cdf, offset: 1e-5 * radius })
+        Some(Walk { scene, patches, triangles, lobe_tables, bvh, area_cdf, offset: 1e-5 * radius, centre })
     }
 
     /// Particle `index` of the first generation: a point uniform over the reflecting
@@ -251,7 +257,7 @@ impl<'a> Walk<'a> {
     /// The nearest patch along the ray and its distance. The back of a two-sided surface's
     /// patch is passed over: its twin's front lies at the same place.
     fn cast(&self, origin: DVec3, direction: DVec3) -> Option<(usize, f64)> {
-        let ray = Ray::new_inf(single(origin), single(direction));
+        let ray = Ray::new_inf(single(origin - self.centre), single(direction));
         let mut hit = RayHit::none();
         let found = self.bvh.ray_traverse(ray, &mut hit, |ray, id| {
             let index = self.bvh.primitive_indices[id] as usize;

@@ -196,3 +196,22 @@ fn test05_the_walk_sizes_the_default_burn_in_and_the_bound_caps_it() {
     assert_eq!(firstshot::render::burn_in_steps(&scene, &patches, &options, 4).0, bundles.div_ceil(4));
     assert_eq!(firstshot::render::longest_burn_in_steps(&scene, &options, 4), (41 + settle).div_ceil(4));
 }
+
+#[test]
+fn test06_a_closed_room_far_from_the_origin_decays_as_at_it() {
+    // test01's room of albedo 0.7 moved 1e5 from the origin, where single precision (the
+    // walk's BVH) holds a coordinate to 2^-7, about 1 % of the room. Cast in world
+    // coordinates, rays started 1e-5 of the radius off their surface fell back onto it and
+    // left through it: the rate came out low. The walk casts relative to the scene's centre.
+    let mut scene = bare_scene();
+    scene.materials = vec![diffuse("all", 0.7)];
+    let corner = DVec3::new(1.0e5, 0.0, -1.0e5);
+    let tris: Vec<_> = room(corner, corner + DVec3::ONE).into_iter().flat_map(|t| split(t, 4)).collect();
+    let mut patches = patches_of(&tris, vec![]);
+    for p in &mut patches.patches {
+        p.material = Some(0);
+    }
+    let decay = measured_decay(&scene, &patches).expect("a walk");
+    eprintln!("{decay:?}");
+    assert!((decay.rate - f64::from(0.7f32)).abs() < 1e-12 && decay.standard_error < 1e-12, "{decay:?}");
+}
