@@ -507,8 +507,14 @@ impl BundleNeeds {
 pub const FINE_BURN_IN_BUNDLES: u32 = 8;
 /// The coarse burn-in's bundle resolution is the full one divided by this.
 pub const COARSE_BURN_IN_DIVISOR: u32 = 2;
-/// Below this the coarse grid saves too little to be worth a second set of line buffers.
-pub const COARSE_BURN_IN_MIN: u32 = 32;
+/// Below this the coarse grid is too coarse for Lbar_j, or saves too little to be worth a
+/// second set of line buffers. At 32 lines across the Cornell box (a 128 x 128 image's
+/// automatic bundle of 64 halved), lines of 31 mm crossed the 380 mm^2 patches at its
+/// creases a few times a bundle: their Lbar_j rose to 14-21 where the median is 0.04, the 8
+/// fine bundles after kept a third of that, and the gather's control variate at those
+/// patches gave pixels of +-15 after one image step and 46 negative pixels after 50 (down to
+/// -0.99; docs/PERFORMANCE.md, "A coarse burn-in of 32 lines"). From 64 lines up it stays.
+pub const COARSE_BURN_IN_MIN: u32 = 64;
 
 /// The coarse start of the burn-in: `Some((resolution, steps))` when the first `steps` of a
 /// burn-in of `burn_in` steps of `per_step` bundles run at the smaller bundle `resolution`, a quarter of the

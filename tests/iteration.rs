@@ -148,9 +148,10 @@ fn test04_fragment_overflow_is_detected_and_redone_exactly() {
     let run = |capacity: Option<u64>| {
         let mut o = options(&scene, 20, 3);
         o.bundle_capacity = capacity;
-        // A coarse start (18 steps at 32, the last 2 steps of four bundles at 64): its own
+        // A coarse start (18 steps at 64, the last 2 steps of four bundles at 128): its own
         // list overflows and grows too.
         o.burn_in = Some(20);
+        o.bundle_resolution = Some(128);
         render(&ctx, &scene, &patches, &o).unwrap()
     };
     let (normal, tight) = (run(None), run(Some(16)));
@@ -394,16 +395,18 @@ fn test08_the_coarse_burn_in_keeps_the_expected_state() {
     let burn_in = 30;
     // Four bundles a step keep 8 bundles (2 steps) fine; the run below takes one a step, so
     // that a step is a bounce of the series.
-    assert_eq!(firstshot::iteration::coarse_burn_in(64, burn_in, 4), Some((32, burn_in - 2)));
-    let (coarse, steps) = firstshot::iteration::coarse_burn_in(64, burn_in, 1).expect("a coarse start at 64");
-    assert_eq!((coarse, steps), (32, burn_in - firstshot::iteration::FINE_BURN_IN_BUNDLES));
+    assert_eq!(firstshot::iteration::coarse_burn_in(128, burn_in, 4), Some((64, burn_in - 2)));
+    let (coarse, steps) = firstshot::iteration::coarse_burn_in(128, burn_in, 1).expect("a coarse start at 128");
+    assert_eq!((coarse, steps), (64, burn_in - firstshot::iteration::FINE_BURN_IN_BUNDLES));
+    // Not below 64 lines (`COARSE_BURN_IN_MIN`).
+    assert_eq!(firstshot::iteration::coarse_burn_in(64, burn_in, 1), None);
     let area: f64 = patches.patches.iter().map(|p| p.area).sum();
     let state_bytes = std::mem::size_of::<firstshot::layout::GpuPatchState>();
     let mut means = Vec::new();
     for seed in 1..=16 {
         let mut opts = options(&scene, 8, seed);
         opts.burn_in = Some(burn_in);
-        opts.bundles_per_step = Some(1);
+        (opts.bundles_per_step, opts.bundle_resolution) = (Some(1), Some(128));
         let mut renderer = Renderer::new(&ctx, &scene, &patches, &opts, &mut NoHooks).unwrap();
         assert_eq!(renderer.advance_to(0, steps, &mut NoHooks).unwrap(), steps);
         let state = renderer.read_state().unwrap();
@@ -433,7 +436,7 @@ fn test08_the_coarse_burn_in_keeps_the_expected_state() {
     // The whole run reports its coarse start.
     let mut opts = options(&scene, 2, 1);
     opts.burn_in = Some(burn_in);
-    opts.bundles_per_step = Some(1);
+    (opts.bundles_per_step, opts.bundle_resolution) = (Some(1), Some(128));
     let done = render(&ctx, &scene, &patches, &opts).unwrap();
     assert_eq!((done.stats.coarse_bundle_resolution, done.stats.coarse_burn_in_steps), (Some(coarse), steps));
     assert_eq!(done.stats.burn_in_steps, burn_in);
