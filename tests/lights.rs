@@ -975,34 +975,6 @@ fn test14_culled_item_buffers_change_no_pixel() {
     assert!(kept > 0 && 2 * kept < chunks.triangles, "kept {kept} of {} triangles", chunks.triangles);
 }
 
-/// `text` with every point moved by `offset`: the triples of the `position`, `look_at` and
-/// `vertices` keys (directions, `up` and colours stay).
-fn moved(text: &str, offset: DVec3) -> String {
-    let shift = |triple: &str| -> String {
-        let v: Vec<f64> = triple.split(',').map(|x| x.trim().parse().expect("a number")).collect();
-        format!("[{}, {}, {}]", v[0] + offset.x, v[1] + offset.y, v[2] + offset.z)
-    };
-    text.lines()
-        .map(|line| {
-            let Some((key, value)) = line.split_once(" = ") else { return line.to_string() };
-            if !matches!(key, "position" | "look_at" | "vertices") {
-                return line.to_string();
-            }
-            // The innermost brackets hold the triples: each ']' closes the last '[' before it.
-            let mut out = String::new();
-            let mut rest = value;
-            while let Some(close) = rest.find(']') {
-                let Some(open) = rest[..close].rfind('[') else { break };
-                out += &rest[..open];
-                out += &shift(&rest[open + 1..close]);
-                rest = &rest[close + 1..];
-            }
-            format!("{key} = {out}{rest}")
-        })
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
 #[test]
 fn test15_a_scene_far_from_the_origin_renders_as_at_the_origin() {
     // Moving a scene, its camera and its lights together changes no light transport: the
@@ -1027,7 +999,8 @@ fn test15_a_scene_far_from_the_origin_renders_as_at_the_origin() {
         let patches = scene::tessellate(&scene, options.patch_size).unwrap();
         render(&ctx, &scene, &patches, &options).unwrap()
     };
-    let (near, far) = (render_at(&text, "test15_near", 8), render_at(&moved(&text, offset), "test15_far", 8));
+    let (near, far) =
+        (render_at(&text, "test15_near", 8), render_at(&common::scenes::moved(&text, offset), "test15_far", 8));
     // The burn-in's length comes from the walk's measured decay per bounce (src/burn_in.rs),
     // which cast its rays in world coordinates until 2026-11-29: there they fell back onto
     // the surface they left, and the moved box decayed faster and burned in for fewer steps.

@@ -128,13 +128,17 @@ fn test01_point_light_shadow_is_exact_per_pixel() {
     assert!(edges < exact / 5, "edges are a thin line: {edges} of {}", exact + edges);
 }
 
-#[test]
-fn test02_area_light_penumbra_converges_to_the_integral_over_the_light() {
-    let text = format!(
+/// FLOOR_AND_OCCLUDER under a square area light, seen by a 40 x 40 camera (test02, test22).
+fn area_light_over_occluder() -> String {
+    format!(
         "{FLOOR_AND_OCCLUDER}\n[camera]\nposition = [0.0, 2.2, -2.4]\nlook_at = [0.0, 0.0, 0.2]\nup = [0.0, 1.0, 0.0]\nfov_y = 50.0\nwidth = 40\nheight = 40\n\
          [[lights]]\ntype = \"area\"\nvertices = [[-0.25, 1.6, -0.25], [0.25, 1.6, -0.25], [0.25, 1.6, 0.25], [-0.25, 1.6, 0.25]]\nradiance = [5.0, 5.0, 5.0]\nsubdivisions = 2\n"
-    );
-    let (_scratch, scene) = load("area", &text);
+    )
+}
+
+#[test]
+fn test02_area_light_penumbra_converges_to_the_integral_over_the_light() {
+    let (_scratch, scene) = load("area", &area_light_over_occluder());
     let Some(coarse) = common::render_direct(&scene, 4) else { return };
     let fine = common::render_direct(&scene, 64).unwrap();
     let caster = Caster::new(&scene);
@@ -1183,31 +1187,9 @@ fn test22_shadow_rays_far_from_the_origin_see_what_they_see_at_it() {
     // 18 % of the image's light, relative RMSE 0.64 against the image at the origin). The
     // segment's ends are moved off their own surfaces (docs/ALGORITHM.md 6, "Visibility (V) by
     // shadow rays"), so the two images differ by rounding alone.
-    let scene_at = |dx: f64| {
-        let x = |v: f64| v + dx;
-        format!(
-            "format = 1\n[settings]\npatch_size = 0.5\n[materials.grey]\ntype = \"diffuse\"\nalbedo = [0.6, 0.6, 0.6]\n\
-             [[shapes]]\ntype = \"quad\"\nvertices = [[{}, 0.0, -1.5], [{}, 0.0, 1.5], [{}, 0.0, 1.5], [{}, 0.0, -1.5]]\nmaterial = \"grey\"\n\
-             [[shapes]]\ntype = \"triangle\"\nvertices = [[{}, 0.6, -0.3], [{}, 0.7, 0.5], [{}, 0.55, 0.0]]\nmaterial = \"grey\"\n\
-             [camera]\nposition = [{}, 2.2, -2.4]\nlook_at = [{}, 0.0, 0.2]\nup = [0.0, 1.0, 0.0]\nfov_y = 50.0\nwidth = 40\nheight = 40\n\
-             [[lights]]\ntype = \"area\"\nvertices = [[{}, 1.6, -0.25], [{}, 1.6, -0.25], [{}, 1.6, 0.25], [{}, 1.6, 0.25]]\nradiance = [5.0, 5.0, 5.0]\n",
-            x(-1.5),
-            x(-1.5),
-            x(1.5),
-            x(1.5),
-            x(-0.4),
-            x(-0.1),
-            x(0.5),
-            x(0.0),
-            x(0.0),
-            x(-0.25),
-            x(0.25),
-            x(0.25),
-            x(-0.25),
-        )
-    };
-    let (_scratch, origin) = load("rays_at_origin", &scene_at(0.0));
-    let (_scratch_far, far) = load("rays_far", &scene_at(1.0e5));
+    let text = area_light_over_occluder();
+    let (_scratch, origin) = load("rays_at_origin", &text);
+    let (_scratch_far, far) = load("rays_far", &common::scenes::moved(&text, DVec3::new(1.0e5, 0.0, 0.0)));
     let Some(at_origin) = common::render_direct(&origin, 16) else { return };
     let moved = common::render_direct(&far, 16).unwrap();
     let (mut num, mut den, mut sum_moved, mut sum_origin) = (0.0, 0.0, 0.0, 0.0);

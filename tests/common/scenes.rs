@@ -124,3 +124,31 @@ pub fn load_text(group: &str, test: &str, text: &str) -> (super::scratch::Scratc
     let scene = firstshot::scene::load(&path).unwrap();
     (scratch, scene)
 }
+
+/// `text` with every point moved by `offset`: the triples of the `position`, `look_at` and
+/// `vertices` keys (directions, `up` and colours stay).
+pub fn moved(text: &str, offset: glam::DVec3) -> String {
+    let shift = |triple: &str| -> String {
+        let v: Vec<f64> = triple.split(',').map(|x| x.trim().parse().expect("a number")).collect();
+        format!("[{}, {}, {}]", v[0] + offset.x, v[1] + offset.y, v[2] + offset.z)
+    };
+    text.lines()
+        .map(|line| {
+            let Some((key, value)) = line.split_once(" = ") else { return line.to_string() };
+            if !matches!(key, "position" | "look_at" | "vertices") {
+                return line.to_string();
+            }
+            // The innermost brackets hold the triples: each ']' closes the last '[' before it.
+            let mut out = String::new();
+            let mut rest = value;
+            while let Some(close) = rest.find(']') {
+                let Some(open) = rest[..close].rfind('[') else { break };
+                out += &rest[..open];
+                out += &shift(&rest[open + 1..close]);
+                rest = &rest[close + 1..];
+            }
+            format!("{key} = {out}{rest}")
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
