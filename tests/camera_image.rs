@@ -18,6 +18,7 @@ fn scene(camera: Camera, environment: [f32; 3]) -> Scene {
         surfaces: vec![],
         lights: vec![],
         notes: vec![],
+        file_origin: glam::DVec3::ZERO,
     }
 }
 

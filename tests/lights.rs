@@ -978,11 +978,12 @@ fn test14_culled_item_buffers_change_no_pixel() {
 #[test]
 fn test15_a_scene_far_from_the_origin_renders_as_at_the_origin() {
     // Moving a scene, its camera and its lights together changes no light transport: the
-    // image must be the same. Far from the origin every position the GPU holds in f32 is
-    // rounded more coarsely; what follows the scene (the bundles' grid about its bounding
-    // sphere, the lights' windows about their points, the camera's rays from its eye) keeps
-    // that rounding at about the offset times 6e-8, here 0.02 units in a box 560 wide.
-    // Architectural models often come with such offsets (survey coordinates). The
+    // image must be the same. Far from the origin every position the GPU holds in f32 would
+    // be rounded more coarsely (about the offset times 6e-8, here 0.02 units in a box 560
+    // wide), so the loader moves such a scene to its own origin (`Scene::recentre`): the
+    // two images then differ by the rounding of two nearby frames, 0.13 % (0.45 % when the
+    // GPU held the offset). Architectural models often come with such offsets (survey
+    // coordinates). The
     // box of cornell_point has a point light, glossy surfaces and, added here, an area light;
     // its walls light each other, so the gather matters (checked below).
     let Some(ctx) = common::gpu() else { return };
@@ -1012,7 +1013,7 @@ fn test15_a_scene_far_from_the_origin_renders_as_at_the_origin() {
         error.relative_rmse, error.mean, error.reference_mean
     );
     // Rounding moves a few edge pixels' samples across an outline, not the image.
-    assert!(error.relative_rmse < 0.01, "moved {offset}, the image is {:.4} off", error.relative_rmse);
+    assert!(error.relative_rmse < 0.005, "moved {offset}, the image is {:.4} off", error.relative_rmse);
     for c in 0..3 {
         let ratio = error.mean[c] / error.reference_mean[c];
         assert!((ratio - 1.0).abs() < 2e-3, "channel {c}: mean {ratio} of the one at the origin");

@@ -978,3 +978,40 @@ fn test24_sharp_glossy_lobes_get_a_note() {
         assert!(scene.notes.iter().all(|n| !n.contains("shininess")), "{name}: {:?}", scene.notes);
     }
 }
+
+#[test]
+fn test25_a_scene_far_from_its_origin_is_moved_to_it_exactly() {
+    // Around its origin (its centre 0.7 of its radius from it): where the file has it.
+    let near = load_str(MINIMAL, source()).unwrap();
+    assert_eq!(near.file_origin, DVec3::ZERO);
+    // Far from it: moved to its own origin (`Scene::recentre`), by a multiple of a power of two
+    // no larger than its radius, so that every position is the file's less `file_origin` to
+    // the bit, the camera's and the light's included.
+    let by = DVec3::new(3.0e6 + 0.25, -1.0e5, 7.0e5);
+    let far = load_str(&common::scenes::moved(MINIMAL, by), source()).unwrap();
+    let o = far.file_origin;
+    assert!((o - by).length() <= 4.0, "moved by {o}");
+    assert!(o.to_array().iter().all(|c| (c / 2.0).fract() == 0.0), "{o} is not a multiple of 2 (the radius is 2.06)");
+    for (f, n) in far.surfaces[0].triangles.iter().zip(&near.surfaces[0].triangles) {
+        for (v_far, v_near) in f.vertices.iter().zip(&n.vertices) {
+            assert_eq!(*v_far + o, *v_near + by);
+            assert!(v_far.length() < 4.0, "{v_far} is not near the origin");
+        }
+    }
+    assert_eq!(far.camera.position + o, near.camera.position + by);
+    assert_eq!(far.camera.look_at + o, near.camera.look_at + by);
+    assert_eq!(far.cameras[0].camera, far.camera);
+    assert_eq!(far.camera.up, near.camera.up);
+    let (Light::Point { position: p_far, .. }, Light::Point { position: p_near, .. }) = (far.lights[0], near.lights[0])
+    else {
+        panic!("a point light")
+    };
+    assert_eq!(p_far + o, p_near + by);
+    // The same patches, moved.
+    let (patches_far, patches_near) =
+        (firstshot::scene::tessellate(&far, 0.3).unwrap(), firstshot::scene::tessellate(&near, 0.3).unwrap());
+    assert_eq!(patches_far.patches.len(), patches_near.patches.len());
+    for (a, b) in patches_far.patches.iter().zip(&patches_near.patches) {
+        assert!((a.area - b.area).abs() < 1e-12 && (a.vertices[0] + o - b.vertices[0] - by).length() < 1e-9);
+    }
+}

@@ -331,3 +331,37 @@ fn test06_path_refusals_name_the_file_and_key_exit_2_and_write_nothing() {
         assert_eq!(listing(&out), Vec::<String>::new(), "{all:?} wrote files");
     }
 }
+
+#[test]
+fn test07_a_path_through_a_scene_far_from_the_origin_sees_what_it_sees_at_it() {
+    // The loader moves a scene far from the origin of its file to its own (`Scene::recentre`);
+    // the path's keyframes are in the file's coordinates and move with it. Forgetting that
+    // puts every frame's camera a million millimetres from the box.
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = Scratch::new("views", "path_far");
+    let text = std::fs::read_to_string(common::scenes::shipped("cornell_box")).unwrap();
+    let by = glam::DVec3::new(1.0e6, 0.0, 3.0e5);
+    std::fs::write(dir.join("near.toml"), &text).unwrap();
+    std::fs::write(dir.join("far.toml"), common::scenes::moved(&text, by)).unwrap();
+    std::fs::write(dir.join("walk_near.toml"), WALK).unwrap();
+    std::fs::write(dir.join("walk_far.toml"), common::scenes::moved(WALK, by)).unwrap();
+    for place in ["near", "far"] {
+        let (scene, walk, out) = (format!("{place}.toml"), format!("walk_{place}.toml"), format!("{place}/w"));
+        let path_args = ["--path", &walk, "--frames", "3", "--steps-per-frame", "2"];
+        run(&dir, &[&[scene.as_str(), "--out", &out][..], &path_args, &FRAME_SIZE, &SMALL].concat());
+    }
+    for f in 0..3 {
+        let read = |place: &str| Image::read_exr(&dir.join(format!("{place}/w_{f:04}.exr"))).unwrap();
+        let (near, far) = (read("near"), read("far"));
+        let (mut num, mut den) = (0.0, 0.0);
+        for (a, b) in far.pixels.iter().flatten().zip(near.pixels.iter().flatten()) {
+            num += ((a - b) as f64).powi(2);
+            den += (*b as f64).powi(2);
+        }
+        let rmse = (num / den).sqrt();
+        eprintln!("frame {f}: relative RMSE {rmse:.5} against the frame at the origin");
+        assert!(den > 0.0 && rmse < 0.002, "frame {f}: relative RMSE {rmse}");
+    }
+}

@@ -98,8 +98,9 @@ pub fn run(
             "--path in a shard (a Slurm array or an Indexed Job): render the walkthrough unsharded".into(),
         ));
     }
-    // `up` and `fov_y` default to the scene's camera (or --camera's).
-    let path = load_path(file, &scene.camera)?;
+    // `up` and `fov_y` default to the scene's camera (or --camera's). The keyframes are in the
+    // scene file's coordinates, the loaded scene in its own (`Scene::recentre`).
+    let path = load_path(file, &scene.camera)?.moved(-scene.file_origin);
     let cameras: Vec<Camera> = path.cameras(frames, options.width, options.height)?;
     // As a run of frames x steps iterations (the burn-in and the stats' image steps).
     let options = RenderOptions { iterations: frames * steps, ..options.clone() };

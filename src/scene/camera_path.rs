@@ -129,6 +129,16 @@ where
 }
 
 impl CameraPath {
+    /// The path with every keyframe's position and look_at moved by `by`: into a scene's
+    /// own coordinates, `-Scene::file_origin` (the file's are the scene file's).
+    pub fn moved(mut self, by: DVec3) -> Self {
+        for k in &mut self.keyframes {
+            k.position += by;
+            k.look_at += by;
+        }
+        self
+    }
+
     /// The keyframe at `u` keyframe intervals from the first (0 <= u <= K - 1).
     pub fn at(&self, u: f64) -> Keyframe {
         let k = &self.keyframes;

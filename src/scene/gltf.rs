@@ -119,7 +119,7 @@ pub fn load_scene(path: &Path) -> Result<Scene> {
     } else {
         model.cameras
     };
-    Ok(Scene {
+    let mut scene = Scene {
         source: path.to_path_buf(),
         camera: cameras[0].camera,
         cameras,
@@ -129,7 +129,10 @@ pub fn load_scene(path: &Path) -> Result<Scene> {
         surfaces: model.surfaces,
         lights: model.lights,
         notes,
-    })
+        file_origin: DVec3::ZERO,
+    };
+    scene.recentre();
+    Ok(scene)
 }
 
 /// From the +z side of the bounding box, at the distance where its bounding sphere fills

@@ -117,7 +117,7 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
         ));
     }
 
-    Ok(Scene {
+    let mut scene = Scene {
         source: source.to_path_buf(),
         camera,
         cameras,
@@ -127,7 +127,10 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
         surfaces,
         lights,
         notes,
-    })
+        file_origin: DVec3::ZERO,
+    };
+    scene.recentre();
+    Ok(scene)
 }
 
 /// Parses the TOML text, keeping the toml crate's line and column in the key.

@@ -44,7 +44,16 @@ pub struct Scene {
     /// Ks scaled down to conserve energy) and each glossy lobe sharper than the method
     /// samples well (`load::SHARP_LOBE_SHININESS`): one line each, printed as `note: ...`.
     pub notes: Vec<String>,
+    /// The point of the file's coordinates that is this scene's origin: zero, unless the
+    /// loader moved a scene that lies far from the file's origin to its own (`recentre`).
+    /// Every position above (surfaces, lights, cameras) is the file's minus this; what the
+    /// user reads back (the viewer's camera) is in the file's coordinates again.
+    pub file_origin: DVec3,
 }
+
+/// A scene whose centre lies farther than this many of its radii from the origin of its
+/// file is moved to it (`Scene::recentre`).
+pub const RECENTRE_RADII: f64 = 4.0;
 
 /// A pinhole camera (right-handed; image right = normalize(forward x up)).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -66,6 +75,63 @@ pub struct NamedCamera {
 }
 
 impl Scene {
+    /// Moves a scene that lies far from the origin of its coordinates to it, exactly (by a
+    /// multiple of a power of two near its radius, which every coordinate's last place
+    /// divides), and keeps the move in `file_origin`. The GPU holds positions in f32, whose
+    /// spacing grows with the distance from the origin: at 1e5 units it is 2^-7, a fifth of
+    /// the Sierpinski scene's smallest triangles moved there, and every kernel (the camera's
+    /// rays, the bundles' depths, the shadow rays) rounded to it. Centred, the scene keeps
+    /// the precision of its own size wherever the file puts it. Only beyond RECENTRE_RADII
+    /// radii: nearer, f32 holds positions to within a few 1e-7 of the scene's size already,
+    /// and scenes modelled around their origin keep their exact numbers.
+    pub fn recentre(&mut self) {
+        let mut low = DVec3::INFINITY;
+        let mut high = DVec3::NEG_INFINITY;
+        let mut include = |p: DVec3| {
+            low = low.min(p);
+            high = high.max(p);
+        };
+        self.surfaces.iter().flat_map(|s| &s.triangles).flat_map(|t| t.vertices).for_each(&mut include);
+        for light in &self.lights {
+            match light {
+                Light::Point { position, .. } | Light::Spot { position, .. } => include(*position),
+                Light::Area { vertices, .. } => vertices.iter().copied().for_each(&mut include),
+                Light::Directional { .. } => {}
+            }
+        }
+        let centre = 0.5 * (low + high);
+        let radius = 0.5 * (high - low).length();
+        if !(radius > 0.0 && radius.is_finite() && centre.length() > RECENTRE_RADII * radius) {
+            return;
+        }
+        // A power of two: the coordinates near `centre` are multiples of their last place,
+        // which is far below it, so subtracting a multiple of it is exact in f64.
+        let grid = 2f64.powi(radius.log2().floor() as i32);
+        self.translate(-(centre / grid).round() * grid);
+    }
+
+    /// Moves everything with a position (surfaces, lights, cameras) by `by`; `file_origin`
+    /// keeps where the file's coordinates then lie.
+    pub fn translate(&mut self, by: DVec3) {
+        for t in self.surfaces.iter_mut().flat_map(|s| &mut s.triangles) {
+            t.vertices = t.vertices.map(|v| v + by);
+        }
+        for light in &mut self.lights {
+            match light {
+                Light::Point { position, .. } | Light::Spot { position, .. } => *position += by,
+                Light::Area { vertices, .. } => *vertices = vertices.map(|v| v + by),
+                Light::Directional { .. } => {}
+            }
+        }
+        let moved = |c: &mut Camera| {
+            c.position += by;
+            c.look_at += by;
+        };
+        moved(&mut self.camera);
+        self.cameras.iter_mut().for_each(|c| moved(&mut c.camera));
+        self.file_origin -= by;
+    }
+
     /// Makes the camera called `name` the one this run renders. The error lists the names.
     pub fn select_camera(&mut self, name: &str) -> std::result::Result<(), String> {
         match self.cameras.iter().find(|c| c.name == name) {

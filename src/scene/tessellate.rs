@@ -648,7 +648,7 @@ impl SourceTriangle {
             return Err(Error::scene(
                 &scene.source,
                 format!("{origin}, triangle {t}"),
-                format!("degenerate or non-finite triangle {:?}", triangle.vertices),
+                format!("degenerate or non-finite triangle {:?}", triangle.vertices.map(|v| v + scene.file_origin)),
             ));
         }
         Ok(SourceTriangle { vertices: triangle.vertices, normal: cross.normalize(), area, longest_edge })
@@ -827,6 +827,7 @@ pub(crate) mod tests {
             surfaces,
             lights,
             notes: Vec::new(),
+            file_origin: DVec3::ZERO,
         }
     }
 

@@ -97,9 +97,14 @@ impl FlyCamera {
 
     /// The camera as a `[camera]` table of the scene format (docs/SCENE_FORMAT.md). Numbers
     /// are written in Rust's shortest form that reads back as the same f64, so the scene
-    /// renders the very camera the viewer showed.
-    pub fn toml(&self) -> String {
-        let c = &self.camera;
+    /// renders the very camera the viewer showed. `file_origin`: the scene's
+    /// (`Scene::file_origin`), so that the table is in the scene file's coordinates.
+    pub fn toml(&self, file_origin: DVec3) -> String {
+        let c = Camera {
+            position: self.camera.position + file_origin,
+            look_at: self.camera.look_at + file_origin,
+            ..self.camera
+        };
         let v = |v: DVec3| format!("[{:?}, {:?}, {:?}]", v.x, v.y, v.z);
         format!(
             "[camera]\nposition = {}\nlook_at = {}\nup = {}\nfov_y = {:?}\nwidth = {}\nheight = {}\n",
@@ -162,7 +167,7 @@ mod tests {
         let mut c = FlyCamera::new(cornell());
         c.turn(12.345, -3.21);
         c.translate(Direction::Left, 1.0 / 3.0);
-        let table: toml::Table = c.toml().parse().unwrap();
+        let table: toml::Table = c.toml(DVec3::ZERO).parse().unwrap();
         let cam = table["camera"].as_table().unwrap();
         let v = |k: &str| {
             let a = cam[k].as_array().unwrap();
@@ -173,5 +178,21 @@ mod tests {
         assert_eq!(v("up"), c.camera.up);
         assert_eq!(cam["fov_y"].as_float().unwrap(), c.camera.fov_y);
         assert_eq!(cam["width"].as_integer().unwrap(), 64);
+    }
+
+    #[test]
+    fn the_printed_table_is_in_the_scene_files_coordinates() {
+        // A scene the loader moved to its own origin (`Scene::recentre`) by this much.
+        let file_origin = DVec3::new(1048576.0, -2.0, 262144.0);
+        let c = FlyCamera::new(cornell());
+        let table: toml::Table = c.toml(file_origin).parse().unwrap();
+        let cam = table["camera"].as_table().unwrap();
+        let v = |k: &str| {
+            let a = cam[k].as_array().unwrap();
+            DVec3::new(a[0].as_float().unwrap(), a[1].as_float().unwrap(), a[2].as_float().unwrap())
+        };
+        assert_eq!(v("position"), c.camera.position + file_origin);
+        assert_eq!(v("look_at"), c.camera.look_at + file_origin);
+        assert_eq!(v("up"), c.camera.up);
     }
 }

@@ -610,7 +610,7 @@ impl Viewer {
         } else {
             format!("step {}, image of {}", s.step, s.step.saturating_sub(start))
         };
-        let p = self.camera.camera.position;
+        let p = self.camera.camera.position + self.setup.scene.file_origin;
         vec![
             progress,
             format!("{:.1} steps/s, {:.1} frames/s", self.rates.steps_per_second, self.rates.frames_per_second),
@@ -659,7 +659,10 @@ impl Viewer {
     /// Prints the camera as a `[camera]` table on standard output.
     fn print_camera(&self) -> Result<(), Failure> {
         let steps = self.session.as_ref().map_or(0, |s| s.step);
-        let text = format!("# firstshot view: the camera at step {steps}\n{}\n", self.camera.toml());
+        let text = format!(
+            "# firstshot view: the camera at step {steps}\n{}\n",
+            self.camera.toml(self.setup.scene.file_origin)
+        );
         print_stdout(&text).map_err(|e| Failure::from(anyhow::anyhow!("writing to standard output: {e}")))
     }
 }

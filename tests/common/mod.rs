@@ -221,6 +221,7 @@ pub fn bare_scene() -> firstshot::scene::Scene {
         surfaces: vec![],
         lights: vec![],
         notes: vec![],
+        file_origin: glam::DVec3::ZERO,
     }
 }
 

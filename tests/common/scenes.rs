@@ -125,8 +125,9 @@ pub fn load_text(group: &str, test: &str, text: &str) -> (super::scratch::Scratc
     (scratch, scene)
 }
 
-/// `text` with every point moved by `offset`: the triples of the `position`, `look_at` and
-/// `vertices` keys (directions, `up` and colours stay).
+/// `text` with every point moved by `offset`: the triples of the `position`, `look_at`,
+/// `vertices`, `center` (a Sierpinski shape's), `min` and `max` (a box's) keys (directions,
+/// `up` and colours stay).
 pub fn moved(text: &str, offset: glam::DVec3) -> String {
     let shift = |triple: &str| -> String {
         let v: Vec<f64> = triple.split(',').map(|x| x.trim().parse().expect("a number")).collect();
@@ -135,7 +136,7 @@ pub fn moved(text: &str, offset: glam::DVec3) -> String {
     text.lines()
         .map(|line| {
             let Some((key, value)) = line.split_once(" = ") else { return line.to_string() };
-            if !matches!(key, "position" | "look_at" | "vertices") {
+            if !matches!(key, "position" | "look_at" | "vertices" | "center" | "min" | "max") {
                 return line.to_string();
             }
             // The innermost brackets hold the triples: each ']' closes the last '[' before it.
