@@ -139,8 +139,7 @@ pub fn load_scene(path: &Path) -> Result<Scene> {
 /// the field of view.
 fn default_camera(surfaces: &[Surface]) -> Camera {
     let points = surfaces.iter().flat_map(|s| s.triangles.iter().flat_map(|t| t.vertices));
-    let (lo, hi) = points
-        .fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(p), hi.max(p)));
+    let (lo, hi) = super::bounding_box(points).unwrap_or((DVec3::INFINITY, DVec3::NEG_INFINITY));
     let center = (lo + hi) / 2.0;
     let radius = ((hi - lo).length() / 2.0).max(1e-6);
     let distance = radius / (DEFAULT_FOV_Y.to_radians() / 2.0).sin();

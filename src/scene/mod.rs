@@ -85,20 +85,12 @@ impl Scene {
     /// radii: nearer, f32 holds positions to within a few 1e-7 of the scene's size already,
     /// and scenes modelled around their origin keep their exact numbers.
     pub fn recentre(&mut self) {
-        let mut low = DVec3::INFINITY;
-        let mut high = DVec3::NEG_INFINITY;
-        let mut include = |p: DVec3| {
-            low = low.min(p);
-            high = high.max(p);
+        let surfaces = self.surfaces.iter().flat_map(|s| &s.triangles).flat_map(|t| t.vertices);
+        let Some((low, high)) =
+            bounding_box(surfaces.chain(self.lights.iter().flat_map(|l| l.points().iter().copied())))
+        else {
+            return;
         };
-        self.surfaces.iter().flat_map(|s| &s.triangles).flat_map(|t| t.vertices).for_each(&mut include);
-        for light in &self.lights {
-            match light {
-                Light::Point { position, .. } | Light::Spot { position, .. } => include(*position),
-                Light::Area { vertices, .. } => vertices.iter().copied().for_each(&mut include),
-                Light::Directional { .. } => {}
-            }
-        }
         let centre = 0.5 * (low + high);
         let radius = 0.5 * (high - low).length();
         if !(radius > 0.0 && radius.is_finite() && centre.length() > RECENTRE_RADII * radius) {
@@ -116,12 +108,8 @@ impl Scene {
         for t in self.surfaces.iter_mut().flat_map(|s| &mut s.triangles) {
             t.vertices = t.vertices.map(|v| v + by);
         }
-        for light in &mut self.lights {
-            match light {
-                Light::Point { position, .. } | Light::Spot { position, .. } => *position += by,
-                Light::Area { vertices, .. } => *vertices = vertices.map(|v| v + by),
-                Light::Directional { .. } => {}
-            }
+        for p in self.lights.iter_mut().flat_map(Light::points_mut) {
+            *p += by;
         }
         let moved = |c: &mut Camera| {
             c.position += by;
@@ -226,6 +214,35 @@ pub enum Light {
     /// `inner_angle` and `outer_angle` (degrees from the axis, 0 <= inner < outer <= 90):
     /// `SpotCone`.
     Spot { position: DVec3, direction: DVec3, intensity: Rgb, inner_angle: f64, outer_angle: f64 },
+}
+
+impl Light {
+    /// The points that place the light: a point or spot light's position, an area light's
+    /// corners; none for a directional light.
+    pub fn points(&self) -> &[DVec3] {
+        match self {
+            Light::Point { position, .. } | Light::Spot { position, .. } => std::slice::from_ref(position),
+            Light::Area { vertices, .. } => vertices,
+            Light::Directional { .. } => &[],
+        }
+    }
+
+    /// The same, to move them.
+    pub fn points_mut(&mut self) -> &mut [DVec3] {
+        match self {
+            Light::Point { position, .. } | Light::Spot { position, .. } => std::slice::from_mut(position),
+            Light::Area { vertices, .. } => vertices,
+            Light::Directional { .. } => &mut [],
+        }
+    }
+}
+
+/// The axis-aligned box (lowest and highest corner) of `points`; `None` when there are none.
+pub fn bounding_box(points: impl IntoIterator<Item = DVec3>) -> Option<(DVec3, DVec3)> {
+    let (low, high) = points
+        .into_iter()
+        .fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(p), hi.max(p)));
+    (low.x <= high.x).then_some((low, high))
 }
 
 /// A spot light's cone as glTF KHR_lights_punctual defines its falloff: with cd the cosine

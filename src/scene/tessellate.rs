@@ -618,11 +618,9 @@ pub fn scene_bounds(patches: &Patches) -> (DVec3, f64) {
     let points = || {
         patches.patches.iter().flat_map(|p| p.vertices).chain(patches.samples.iter().filter(placed).map(|s| s.position))
     };
-    let (lo, hi) = points()
-        .fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| (lo.min(p), hi.max(p)));
-    if lo.x > hi.x {
+    let Some((lo, hi)) = super::bounding_box(points()) else {
         return (DVec3::ZERO, 0.0);
-    }
+    };
     let center = 0.5 * (lo + hi);
     let radius = points().map(|p| p.distance(center)).fold(0.0, f64::max);
     (center, radius)

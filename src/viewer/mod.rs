@@ -176,15 +176,8 @@ pub(crate) fn run(args: ViewArgs) -> Result<(), Failure> {
 
 /// The diagonal of the scene's bounding box (a speed that suits its size).
 fn scene_diagonal(patches: &Patches) -> f64 {
-    let mut lo = glam::DVec3::splat(f64::INFINITY);
-    let mut hi = glam::DVec3::splat(f64::NEG_INFINITY);
-    for p in &patches.patches {
-        for v in p.vertices {
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
-    }
-    let d = (hi - lo).length();
+    let d =
+        scene::bounding_box(patches.patches.iter().flat_map(|p| p.vertices)).map_or(0.0, |(lo, hi)| (hi - lo).length());
     if d.is_finite() && d > 0.0 { d } else { 1.0 }
 }
 
