@@ -1196,16 +1196,10 @@ fn test22_shadow_rays_far_from_the_origin_see_what_they_see_at_it() {
     assert_eq!(far.file_origin, DVec3::ZERO);
     let Some(at_origin) = common::render_direct(&origin, 16) else { return };
     let moved = common::render_direct(&far, 16).unwrap();
-    let (mut num, mut den, mut sum_moved, mut sum_origin) = (0.0, 0.0, 0.0, 0.0);
-    for (a, b) in moved.pixels.iter().zip(&at_origin.pixels) {
-        num += ((a[0] - b[0]) as f64).powi(2);
-        den += (b[0] as f64).powi(2);
-        sum_moved += a[0] as f64;
-        sum_origin += b[0] as f64;
-    }
-    let (rmse, ratio) = ((num / den).sqrt(), sum_moved / sum_origin);
+    let difference = common::difference(&moved, &at_origin);
+    let (rmse, ratio) = (difference.relative_rmse, difference.ratio_of_means);
     eprintln!("moved 1e5 from the origin: relative RMSE {rmse:.4}, ratio of means {ratio:.4}");
-    assert!(sum_origin > 0.0, "the scene is lit");
+    assert!(difference.reference_mean > 0.0, "the scene is lit");
     assert!(rmse < 0.03 && (ratio - 1.0).abs() < 0.005, "relative RMSE {rmse}, ratio of means {ratio}");
 }
 
@@ -1258,16 +1252,8 @@ fn test24_the_whole_pipeline_far_from_the_origin_renders_what_it_renders_at_it()
     let (at_origin, moved) = (image(&origin), image(&far));
     assert_eq!(moved.stats.patches, at_origin.stats.patches);
     assert_eq!(moved.stats.burn_in_steps, at_origin.stats.burn_in_steps);
-    let (mut num, mut den, mut sum_moved, mut sum_origin) = (0.0, 0.0, 0.0, 0.0);
-    for (a, b) in moved.image.pixels.iter().zip(&at_origin.image.pixels) {
-        for c in 0..3 {
-            num += ((a[c] - b[c]) as f64).powi(2);
-            den += (b[c] as f64).powi(2);
-            sum_moved += a[c] as f64;
-            sum_origin += b[c] as f64;
-        }
-    }
-    let (rmse, ratio) = ((num / den).sqrt(), sum_moved / sum_origin);
+    let difference = common::difference(&moved.image, &at_origin.image);
+    let (rmse, ratio) = (difference.relative_rmse, difference.ratio_of_means);
     eprintln!("moved ({}) from the origin: relative RMSE {rmse:.5}, ratio of means {ratio:.5}", by);
     assert!(rmse < 0.003 && (ratio - 1.0).abs() < 0.001, "relative RMSE {rmse}, ratio of means {ratio}");
 }

@@ -326,3 +326,26 @@ pub fn centre_mean(image: &firstshot::image::Image) -> f64 {
         (6..10).flat_map(|y| (6..10).map(move |x| (x, y))).map(|(x, y)| image.at(x, y)[0] as f64).collect();
     centre.iter().sum::<f64>() / centre.len() as f64
 }
+
+/// How image `a` differs from image `b` of the same size, pixel by pixel over every channel:
+/// the relative RMSE (the RMS of a - b over the RMS of b), the ratio of their means, and b's
+/// mean.
+pub struct Difference {
+    pub relative_rmse: f64,
+    pub ratio_of_means: f64,
+    pub reference_mean: f64,
+}
+
+pub fn difference(a: &firstshot::image::Image, b: &firstshot::image::Image) -> Difference {
+    assert_eq!((a.width, a.height), (b.width, b.height), "images of different sizes");
+    let (mut num, mut den, mut sum_a, mut sum_b) = (0.0, 0.0, 0.0, 0.0);
+    for (x, y) in a.pixels.iter().flatten().zip(b.pixels.iter().flatten()) {
+        let (x, y) = (*x as f64, *y as f64);
+        num += (x - y).powi(2);
+        den += y * y;
+        sum_a += x;
+        sum_b += y;
+    }
+    let count = (3 * b.pixels.len()).max(1) as f64;
+    Difference { relative_rmse: (num / den).sqrt(), ratio_of_means: sum_a / sum_b, reference_mean: sum_b / count }
+}
