@@ -632,9 +632,12 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
     firstshot::render::check_options(&scene, &options)?;
     say.say(format!("loaded {} in {:.0} ms", scene_path.display(), start.elapsed().as_secs_f64() * 1e3));
 
-    let t = Instant::now();
-    let patches = scene::tessellate(&scene, options.patch_size)?;
-    let tessellation_ms = t.elapsed().as_secs_f64() * 1e3;
+    // The adapter opens while the scene is tessellated (`Context::open_while`).
+    let (ctx, tessellated) = Context::open_while(&args.adapter, || {
+        let t = Instant::now();
+        scene::tessellate(&scene, options.patch_size).map(|p| (p, t.elapsed().as_secs_f64() * 1e3))
+    });
+    let (patches, tessellation_ms) = tessellated?;
     say.say(format!(
         "tessellated into {} patches and {} light samples in {tessellation_ms:.0} ms",
         patches.patches.len(),
@@ -644,7 +647,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         say.say(format!("note: {note}"));
     }
     let resume = read_resume(&args, &plan, &scene, &patches, &options)?;
-    let ctx = Context::new(&args.adapter)?;
+    let ctx = ctx?;
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
     say.say(format!("adapter: {}", ctx.summary));
     let memory = firstshot::render::predict_memory(&ctx, &scene, &patches, &options);

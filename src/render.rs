@@ -905,13 +905,14 @@ impl<'a> Renderer<'a> {
         let mut buffers = SceneBuffers::with_pages(device, scene, patches, options.first_shot, page);
         buffers.raster.cull = options.cull_raster;
         let upload_ms = milliseconds(upload);
-        let first_shot = if !options.first_shot || patches.samples.is_empty() {
-            None
-        } else {
-            let stats = first_shot::run(ctx, &mut buffers, patches, hemicube_resolution, options.light_window)?;
-            hooks.phase("first shot", stats.ms);
-            Some(stats)
-        };
+        // The burn-in's length comes from a walk over the patches on the host (src/burn_in.rs,
+        // tens of ms): it runs on a thread of its own while the device does the first shot.
+        let (burn_in_walk, first_shot) = std::thread::scope(|s| {
+            let walk = s.spawn(|| burn_in_steps(scene, patches, options, per_step));
+            let first_shot = Self::first_shot_of(ctx, &mut buffers, patches, options, hemicube_resolution, hooks);
+            (walk.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)), first_shot)
+        });
+        let first_shot = first_shot?;
         let direct = DirectLights::new(ctx, scene, patches, &buffers, options);
         // Only where the image gathers (an iteration) and there are lights to evaluate.
         let per_point = options.iterations > 0 && first_bounce_per_point(options, patches) && direct.count() > 0;
@@ -929,7 +930,7 @@ impl<'a> Renderer<'a> {
             }
             Some(Iteration::new(ctx, &buffers, grid, capacity, per_point)?)
         };
-        let (burn_in, burn_in_decay) = burn_in_steps(scene, patches, options, per_step);
+        let (burn_in, burn_in_decay) = burn_in_walk;
         let coarse = match (&iteration, crate::iteration::coarse_burn_in(bundle_resolution, burn_in, per_step)) {
             (Some(full), Some((resolution, steps))) => {
                 let capacity = initial_fragment_capacity(options, &ctx.limits(), patches, buffers.radius, resolution);
@@ -1005,6 +1006,23 @@ impl<'a> Renderer<'a> {
             upload_ms,
             start,
         })
+    }
+
+    /// The first shot of `new` (none without first-shot lights or with `--no-first-shot`).
+    fn first_shot_of(
+        ctx: &Context,
+        buffers: &mut SceneBuffers,
+        patches: &Patches,
+        options: &RenderOptions,
+        hemicube_resolution: u32,
+        hooks: &mut dyn Hooks,
+    ) -> Result<Option<FirstShotStats>> {
+        if !options.first_shot || patches.samples.is_empty() {
+            return Ok(None);
+        }
+        let stats = first_shot::run(ctx, buffers, patches, hemicube_resolution, options.light_window)?;
+        hooks.phase("first shot", stats.ms);
+        Ok(Some(stats))
     }
 
     pub fn first_shot(&self) -> Option<&FirstShotStats> {

@@ -111,7 +111,9 @@ pub fn run(
     let mut plan = OutputPlan::with_images(&exr, &exrs, args.stats.as_deref(), scene_path, false)?;
     firstshot::render::check_options(scene, &options)?;
     let fingerprint = fingerprint(scene, &options, &path, frames, steps);
-    let patches = firstshot::scene::tessellate(scene, options.patch_size)?;
+    // The adapter opens while the scene is tessellated (`Context::open_while`).
+    let (ctx, patches) = Context::open_while(&args.adapter, || firstshot::scene::tessellate(scene, options.patch_size));
+    let patches = patches?;
     let resume = match args.resume {
         false => None,
         true => {
@@ -122,7 +124,7 @@ pub fn run(
             Some(read_resume(&plan, fingerprint, burn_in, steps, frames)?)
         }
     };
-    let ctx = Context::new(&args.adapter)?;
+    let ctx = ctx?;
     firstshot::render::check_limits(&ctx.limits(), &patches, &options)?;
     say.say(format!("adapter: {}", ctx.summary));
     if stop.requested() {

@@ -274,6 +274,20 @@ impl Context {
         Self::new_with_features(choice, wgpu::Features::empty())
     }
 
+    /// `Context::new` on a second thread while `work` runs on this one, and both results.
+    /// Opening the adapter is mostly loading and starting its driver (about 30 ms for
+    /// lavapipe), and the scene's tessellation is host work of the same order: the command
+    /// line does them side by side, as a CPU adapter's threads are idle until the first
+    /// upload. The caller reports `work`'s errors first, as it did when the two ran in turn.
+    pub fn open_while<T: Send>(choice: &AdapterChoice, work: impl FnOnce() -> T) -> (Result<Context>, T) {
+        std::thread::scope(|s| {
+            let opening = s.spawn(|| Context::new(choice));
+            let done = work();
+            let ctx = opening.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            (ctx, done)
+        })
+    }
+
     /// As `new`, with those of the `wanted` optional features that the adapter has (tools
     /// such as the benchmark harness ask for timestamp queries); `features()` says which
     /// were enabled. Nothing in the library depends on them.
