@@ -826,6 +826,28 @@ fn test18_threads_open_and_close_devices_at_once() {
     }
 }
 
+/// The command line opens its device on a second thread while it tessellates the scene
+/// (`Context::open_while`), then renders on the first. The work's result comes back with
+/// the device, and that device renders the image a device opened here renders, bit for bit.
+#[test]
+fn test19_a_device_opened_while_tessellating_renders_as_one_opened_here() {
+    let Some(here) = common::gpu() else {
+        return;
+    };
+    let scene = firstshot::scene::load::load_str(MINIMAL, Path::new("minimal.toml")).unwrap();
+    let mut options = firstshot::render::RenderOptions::from_scene(&scene);
+    (options.iterations, options.width, options.height, options.seed) = (4, 32, 32, 3);
+    let (opened, patches) = firstshot::gpu::Context::open_while(&common::test_adapter(), || {
+        firstshot::scene::tessellate(&scene, options.patch_size)
+    });
+    let (opened, patches) = (opened.expect("opening a device beside the tessellation"), patches.unwrap());
+    assert_eq!(opened.summary.to_string(), here.summary.to_string());
+    let beside = firstshot::render::render(&opened, &scene, &patches, &options).unwrap().image;
+    let own = firstshot::render::render(&here, &scene, &patches, &options).unwrap().image;
+    assert!(beside.pixels.iter().any(|p| p.iter().any(|&c| c > 0.0)), "a black image proves nothing");
+    assert_eq!(beside.pixels, own.pixels);
+}
+
 // ---------------------------------------------------------------------------------------
 // The contract under random flag values.
 
