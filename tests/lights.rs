@@ -983,9 +983,8 @@ fn test15_a_scene_far_from_the_origin_renders_as_at_the_origin() {
     // wide), so the loader moves such a scene to its own origin (`Scene::recentre`): the
     // two images then differ by the rounding of two nearby frames, 0.13 % (0.45 % when the
     // GPU held the offset). Architectural models often come with such offsets (survey
-    // coordinates). The
-    // box of cornell_point has a point light, glossy surfaces and, added here, an area light;
-    // its walls light each other, so the gather matters (checked below).
+    // coordinates). The box of cornell_point has a point light, glossy surfaces and, added
+    // here, an area light; its walls light each other, so the gather matters (checked below).
     let Some(ctx) = common::gpu() else { return };
     let offset = DVec3::new(300_000.0, 100_000.0, -200_000.0);
     let text = std::fs::read_to_string(common::scenes::shipped("cornell_point")).unwrap()
