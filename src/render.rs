@@ -14,7 +14,7 @@ use crate::memory::initial_fragment_capacity;
 use crate::rng::StepRng;
 use crate::scene::{Camera, Light, NamedCamera, Patches, Scene};
 use crate::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
-use crate::stages::image_estimate::ImageEstimate;
+use crate::stages::image_estimate::{ImageEstimate, ImagePipelines};
 use crate::{Error, Result};
 use serde::Serialize;
 use std::time::Instant;
@@ -905,17 +905,27 @@ impl<'a> Renderer<'a> {
         let mut buffers = SceneBuffers::with_pages(device, scene, patches, options.first_shot, page);
         buffers.raster.cull = options.cull_raster;
         let upload_ms = milliseconds(upload);
-        // The burn-in's length comes from a walk over the patches on the host (src/burn_in.rs,
-        // tens of ms): it runs on a thread of its own while the device does the first shot.
-        let (burn_in_walk, first_shot) = std::thread::scope(|s| {
-            let walk = s.spawn(|| burn_in_steps(scene, patches, options, per_step));
-            let first_shot = Self::first_shot_of(ctx, &mut buffers, patches, options, hemicube_resolution, hooks);
-            (walk.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)), first_shot)
-        });
-        let first_shot = first_shot?;
         let direct = DirectLights::new(ctx, scene, patches, &buffers, options);
         // Only where the image gathers (an iteration) and there are lights to evaluate.
         let per_point = options.iterations > 0 && first_bounce_per_point(options, patches) && direct.count() > 0;
+        // Two pieces of host work run on threads of their own while the device does the first
+        // shot: the walk over the patches that sizes the burn-in (src/burn_in.rs, tens of ms),
+        // and the image estimate's pipelines, which a CPU adapter compiles on the threads
+        // that ask for them (about 80 ms on two cores for the Sierpinski scene, when the
+        // device sat idle).
+        let (paging, scene_constants, lights) = (buffers.paging(), buffers.constants(), direct.specialization());
+        let passes = crate::stages::image_estimate::fused_gather(&ctx.summary, options.gather);
+        let (burn_in_walk, image_pipelines, first_shot) = std::thread::scope(|s| {
+            let walk = s.spawn(|| burn_in_steps(scene, patches, options, per_step));
+            let pipelines =
+                s.spawn(|| ImagePipelines::build(&ctx.device, paging, &scene_constants, &lights, per_point, passes));
+            let first_shot = Self::first_shot_of(ctx, &mut buffers, patches, options, hemicube_resolution, hooks);
+            fn join<T>(t: std::thread::ScopedJoinHandle<'_, T>) -> T {
+                t.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            }
+            (join(walk), join(pipelines), first_shot)
+        });
+        let first_shot = first_shot?;
         let iteration = if options.iterations == 0 {
             None
         } else {
@@ -942,8 +952,8 @@ impl<'a> Renderer<'a> {
         // Only a first-shot emitting shape's light is shared between D and G; without one the
         // gather skips the test (two loads of the sender's patch a pixel).
         let mis = gathers && options.first_shot && !patches.emitters.is_empty();
-        // The views after the first share its kernels and pipelines (about 80 ms of pipeline
-        // builds a view on lavapipe): only their buffers, textures and bind groups are new.
+        // The views share the image's kernels and pipelines (`image_pipelines`): only their
+        // buffers, textures and bind groups are their own.
         let gather = iteration.as_ref().map(|i| &i.gather);
         let stride = crate::iteration::pixel_stride(per_step);
         let mut views: Vec<ViewImage> = Vec::new();
@@ -963,9 +973,7 @@ impl<'a> Renderer<'a> {
                 gather,
                 band_rows,
                 stride,
-                per_point,
-                crate::stages::image_estimate::fused_gather(&ctx.summary, options.gather),
-                like.map(|v| &v.estimate),
+                &image_pipelines,
             );
             estimate.set_params(&ctx.queue, scene.environment, buffers.patch_count, direct.count(), mis, gathers);
             views.push(ViewImage {

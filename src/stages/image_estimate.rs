@@ -212,15 +212,92 @@ pub fn list_workgroups(adapter: &crate::gpu::AdapterSummary) -> u32 {
     if adapter.is_cpu() { 8 } else { 64 }
 }
 
+/// The image estimate's kernel and pipelines. They depend on the scene's paging, materials and
+/// lights, not on a camera: every view of a render shares them, and `Renderer::new` builds
+/// them beside the first shot.
+#[derive(Clone)]
+pub struct ImagePipelines {
+    built: Kernel,
+    direct: wgpu::ComputePipeline,
+    gather: wgpu::ComputePipeline,
+    /// `gather_edges`, where the gather's passes are split.
+    edges: Option<wgpu::ComputePipeline>,
+    /// `gather_first_bounce`, where the gathers list near senders (`first_bounce_per_point`).
+    first_bounce: Option<wgpu::ComputePipeline>,
+    /// How a gather's pixels are finished (`fused_gather`).
+    passes: GatherPasses,
+}
+
+impl ImagePipelines {
+    /// `paging` and `scene_constants`: `SceneBuffers::paging` and `SceneBuffers::constants`
+    /// (the code of what the scene lacks left out: glossy materials, shared emitting shapes).
+    /// `lights`: `DirectLights::specialization`, the kinds of light the table holds.
+    /// `first_bounce_per_point`: the gather evaluates each sender's first reflection of the
+    /// lights at the point it sees (`render::first_bounce_per_point`).
+    /// `passes`: how the gather finishes its pixels (`fused_gather`).
+    pub fn build(
+        device: &wgpu::Device,
+        paging: crate::gpu::kernel::Paging,
+        scene_constants: &[(&'static str, f64)],
+        lights: &[(&'static str, f64)],
+        first_bounce_per_point: bool,
+        passes: GatherPasses,
+    ) -> Self {
+        let split = matches!(passes, GatherPasses::Split { .. });
+        let built = SPEC.build_paged(device, paging);
+        let with_scene = |constants: &[(&'static str, f64)]| [constants, scene_constants].concat();
+        // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
+        let lights = with_scene(lights);
+        let per_point = with_scene(&[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)]);
+        // Fused, the gather evaluates the direct light at near senders' points itself, so it
+        // is compiled for the lights too.
+        let gather = match passes {
+            GatherPasses::Fused => [
+                &[("SEEN_IN_GATHER", 1.0), ("FUSED_GATHER", 1.0)],
+                lights.as_slice(),
+                &[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)],
+            ]
+            .concat(),
+            GatherPasses::Split { .. } => [&[("SEEN_IN_GATHER", 1.0)], per_point.as_slice()].concat(),
+        };
+        // Built side by side: a CPU adapter compiles each pipeline on the thread that asks for
+        // it (about 190 ms for the four on lavapipe, one after another).
+        std::thread::scope(|threads| {
+            let build = |entry: &'static str, constants: &[(&'static str, f64)]| {
+                let built = &built;
+                let constants = constants.to_vec();
+                threads.spawn(move || built.specialized_pipeline(device, entry, &constants))
+            };
+            let direct = build("direct", &lights);
+            let gather = build("gather", &gather);
+            let edges = split.then(|| build("gather_edges", &per_point));
+            // The direct light at the near senders' points, compiled like `direct`.
+            let first_bounce = (split && first_bounce_per_point).then(|| build("gather_first_bounce", &lights));
+            let join = |t: std::thread::ScopedJoinHandle<'_, wgpu::ComputePipeline>| {
+                t.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            };
+            ImagePipelines {
+                direct: join(direct),
+                gather: join(gather),
+                edges: edges.map(join),
+                first_bounce: first_bounce.map(join),
+                built: built.clone(),
+                passes,
+            }
+        })
+    }
+
+    /// How the gather finishes its pixels.
+    pub fn passes(&self) -> GatherPasses {
+        self.passes
+    }
+}
+
 impl ImageEstimate {
     /// `gather`: the bundle buffers of the iteration, or `None` for direct-light-only passes.
     /// `band_rows`: rows per band of the image sum (`band_rows`, or fewer to test the bands).
     /// `pixel_stride`: `iteration::pixel_stride` of the step's bundles.
-    /// `first_bounce_per_point`: the gather evaluates each sender's first reflection of the
-    /// lights at the point it sees (`render::first_bounce_per_point`).
-    /// `passes`: how the gather finishes its pixels (`fused_gather`).
-    /// `like`: the estimate of another view of the same render, whose kernel and pipelines
-    /// this one shares (they depend on the scene's paging and lights, not on the camera).
+    /// `pipelines`: the render's (`ImagePipelines::build`), shared by its views.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         device: &wgpu::Device,
@@ -230,67 +307,17 @@ impl ImageEstimate {
         gather: Option<&GatherBuffers>,
         band_rows: u32,
         pixel_stride: u32,
-        first_bounce_per_point: bool,
-        passes: GatherPasses,
-        like: Option<&Self>,
+        pipelines: &ImagePipelines,
     ) -> Self {
-        // The pipelines shared with `like` were built for its passes.
-        let passes = like.map_or(passes, |l| l.passes);
+        let ImagePipelines {
+            built,
+            direct: direct_pipeline,
+            gather: gather_pipeline,
+            edges: edges_pipeline,
+            first_bounce: first_bounce_pipeline,
+            passes,
+        } = pipelines.clone();
         let split = matches!(passes, GatherPasses::Split { .. });
-        let (built, direct_pipeline, gather_pipeline, edges_pipeline, first_bounce_pipeline) = match like {
-            Some(like) => (
-                like.built.clone(),
-                like.direct_pipeline.clone(),
-                like.gather_pipeline.clone(),
-                like.edges_pipeline.clone(),
-                like.first_bounce_pipeline.clone(),
-            ),
-            None => {
-                let built = SPEC.build_paged(device, scene.paging());
-                // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
-                // And without the code of what the scene lacks (glossy materials, shared
-                // emitting shapes: `SceneBuffers::constants`).
-                let with_scene = |constants: &[(&'static str, f64)]| [constants, &scene.constants()].concat();
-                let lights = with_scene(&direct.specialization());
-                let per_point = with_scene(&[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)]);
-                // Fused, the gather evaluates the direct light at near senders' points itself,
-                // so it is compiled for the lights too.
-                let gather = match passes {
-                    GatherPasses::Fused => [
-                        &[("SEEN_IN_GATHER", 1.0), ("FUSED_GATHER", 1.0)],
-                        lights.as_slice(),
-                        &[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)],
-                    ]
-                    .concat(),
-                    GatherPasses::Split { .. } => [&[("SEEN_IN_GATHER", 1.0)], per_point.as_slice()].concat(),
-                };
-                // Built side by side: a CPU adapter compiles each pipeline on the thread that
-                // asks for it (about 190 ms for the four on lavapipe, one after another).
-                let pipelines = std::thread::scope(|threads| {
-                    let build = |entry: &'static str, constants: &[(&'static str, f64)]| {
-                        let built = &built;
-                        let constants = constants.to_vec();
-                        threads.spawn(move || built.specialized_pipeline(device, entry, &constants))
-                    };
-                    let direct_pipeline = build("direct", &lights);
-                    let gather_pipeline = build("gather", &gather);
-                    let edges_pipeline = split.then(|| build("gather_edges", &per_point));
-                    // The direct light at the near senders' points, compiled like `direct`.
-                    let first_bounce_pipeline =
-                        (split && first_bounce_per_point).then(|| build("gather_first_bounce", &lights));
-                    let join = |t: std::thread::ScopedJoinHandle<'_, wgpu::ComputePipeline>| {
-                        t.join().expect("an image estimate pipeline's build panicked")
-                    };
-                    (
-                        join(direct_pipeline),
-                        join(gather_pipeline),
-                        edges_pipeline.map(join),
-                        first_bounce_pipeline.map(join),
-                    )
-                });
-                (built, pipelines.0, pipelines.1, pipelines.2, pipelines.3)
-            }
-        };
         let band_rows = band_rows.max(1);
         let bands = (0..camera.height)
             .step_by(band_rows as usize)
