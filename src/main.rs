@@ -328,6 +328,8 @@ pub(crate) fn usage(message: String) -> Failure {
 }
 
 fn main() -> ExitCode {
+    // SAFETY: the first thing the process does; no other thread exists yet.
+    unsafe { firstshot::gpu::context::set_cpu_adapter_threads() };
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Compare { a, b }) => compare(&a, &b),

@@ -343,7 +343,8 @@ pub struct Machine {
     pub cpu: String,
     pub cores: usize,
     pub os: String,
-    /// LP_NUM_THREADS (lavapipe/llvmpipe's thread count; they default to the cores).
+    /// LP_NUM_THREADS (lavapipe/llvmpipe's thread count: `set_cpu_adapter_threads`'s four a
+    /// core unless the environment set it).
     pub lp_num_threads: Option<String>,
     pub adapters: Vec<AdapterSummary>,
     pub commit: Option<String>,
@@ -446,6 +447,10 @@ pub fn spread(s: &stats::Summary, digits: usize) -> String {
 }
 
 fn main() -> ExitCode {
+    // As the command line does, so that the in-process studies measure what a user gets (the
+    // machine's record says the value); the renderer processes the studies start set it too.
+    // SAFETY: the first thing the process does; no other thread exists yet.
+    unsafe { firstshot::gpu::context::set_cpu_adapter_threads() };
     let args = Args::parse();
     let quick = args.quick;
     let default_scenes: Vec<String> = if args.mode == Mode::Peers {
