@@ -397,6 +397,10 @@ pub struct RenderStats {
     pub coarse_burn_in_steps: u32,
     pub coarse_bundle_resolution: Option<u32>,
     pub seed: u64,
+    /// `LP_NUM_THREADS` as the run had it: the worker threads of Mesa's CPU adapters (the
+    /// command line sets four a core where it is unset, `gpu::context::set_cpu_adapter_threads`;
+    /// `None` where a library caller left it unset, Mesa's one a core).
+    pub lp_num_threads: Option<String>,
     pub tessellation_ms: f64,
     pub upload_ms: f64,
     pub image_ms: f64,
@@ -1449,6 +1453,7 @@ impl<'a> Renderer<'a> {
                 coarse_burn_in_steps: coarse_plan.map_or(0, |(_, steps)| iteration_stats.steps.min(steps)),
                 coarse_bundle_resolution: coarse_plan.map(|(resolution, _)| resolution),
                 seed: o.seed,
+                lp_num_threads: std::env::var("LP_NUM_THREADS").ok(),
                 tessellation_ms: 0.0,
                 upload_ms: self.upload_ms,
                 image_ms,

@@ -484,3 +484,34 @@ fn test10_a_sharp_glossy_lobe_is_noted_on_stderr_and_in_the_stats() {
         }
     }
 }
+
+#[test]
+fn test11_the_cpu_adapters_get_four_worker_threads_a_core_unless_the_environment_says() {
+    // Mesa's CPU adapters read LP_NUM_THREADS when the adapter opens; the command line sets
+    // it to four a core where it is unset (gpu::context::set_cpu_adapter_threads, CLI.md) and
+    // leaves a user's own value alone. The stats say what the run had, and the image is the
+    // same either way: every sum the kernels make is exact in any order.
+    if common::gpu().is_none() {
+        return;
+    }
+    let scratch = Scratch::new("cli", "lp-threads");
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut images = Vec::new();
+    for (given, expected) in [(None, (4 * cores).to_string()), (Some("3"), "3".to_string())] {
+        let dir = scratch.dir(given.unwrap_or("unset"));
+        let (exr, stats) = (dir.join("cb.exr"), dir.join("s.json"));
+        let mut command = common::bin::firstshot();
+        command.current_dir(&dir).env_remove("LP_NUM_THREADS");
+        if let Some(value) = given {
+            command.env("LP_NUM_THREADS", value);
+        }
+        let (exr_arg, stats_arg) = (exr.display().to_string(), stats.display().to_string());
+        let args = [&cornell_box(), "--iterations", "4", "--width", "24", "--height", "24", "--out", &exr_arg];
+        let o = command.args(args).args(["--stats", &stats_arg, "--quiet"]).output().expect("running firstshot");
+        assert_eq!(o.status.code(), Some(0), "stderr:\n{}", stderr(&o));
+        let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        assert_eq!(json["lp_num_threads"], expected.as_str(), "LP_NUM_THREADS {given:?}");
+        images.push(std::fs::read(&exr).expect("the image"));
+    }
+    assert!(images[0] == images[1], "the image depends on the CPU adapter's thread count");
+}
