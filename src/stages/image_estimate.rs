@@ -113,13 +113,8 @@ struct Band {
 /// Pipelines, parameters and the image sum (two halves of vec4<f32> per pixel: rgb sum,
 /// w count; Le + D, then G), in bands of rows so that no binding exceeds the device's limit.
 pub struct ImageEstimate {
-    built: Kernel,
-    direct_pipeline: wgpu::ComputePipeline,
-    gather_pipeline: wgpu::ComputePipeline,
-    /// `gather_edges`, where the gather's passes are split.
-    edges_pipeline: Option<wgpu::ComputePipeline>,
-    /// `gather_first_bounce`, where the gathers list near senders (`first_bounce_per_point`).
-    first_bounce_pipeline: Option<wgpu::ComputePipeline>,
+    /// The render's, shared by its views (`ImagePipelines::build`).
+    pipelines: ImagePipelines,
     bands: Vec<Band>,
     direct_group: wgpu::BindGroup,
     gather_group: wgpu::BindGroup,
@@ -128,8 +123,6 @@ pub struct ImageEstimate {
     /// 1, or 2 when a step has four bundles and each gathers one pixel of every 2 x 2
     /// (`iteration::pixel_stride`): the gather's grid is this much smaller on each side.
     pixel_stride: u32,
-    /// How a gather's pixels are finished: in `gather` itself, or in the list passes.
-    passes: GatherPasses,
 }
 
 /// How `gather` finishes the pixels near their patch's edge and those with a near sender:
@@ -286,11 +279,6 @@ impl ImagePipelines {
             }
         })
     }
-
-    /// How the gather finishes its pixels.
-    pub fn passes(&self) -> GatherPasses {
-        self.passes
-    }
 }
 
 impl ImageEstimate {
@@ -309,15 +297,8 @@ impl ImageEstimate {
         pixel_stride: u32,
         pipelines: &ImagePipelines,
     ) -> Self {
-        let ImagePipelines {
-            built,
-            direct: direct_pipeline,
-            gather: gather_pipeline,
-            edges: edges_pipeline,
-            first_bounce: first_bounce_pipeline,
-            passes,
-        } = pipelines.clone();
-        let split = matches!(passes, GatherPasses::Split { .. });
+        let built = &pipelines.built;
+        let split = matches!(pipelines.passes, GatherPasses::Split { .. });
         let band_rows = band_rows.max(1);
         let bands = (0..camera.height)
             .step_by(band_rows as usize)
@@ -371,20 +352,15 @@ impl ImageEstimate {
                 ("shadow_triangles", direct.shadow_triangles().into()),
             ],
         );
-        let gather_group = Self::gather_group(device, &built, gather);
+        let gather_group = Self::gather_group(device, built, gather);
         ImageEstimate {
-            built,
-            direct_pipeline,
-            gather_pipeline,
-            edges_pipeline,
-            first_bounce_pipeline,
+            pipelines: pipelines.clone(),
             bands,
             direct_group,
             gather_group,
             width: camera.width,
             height: camera.height,
             pixel_stride: pixel_stride.max(1),
-            passes,
         }
     }
 
@@ -421,18 +397,18 @@ impl ImageEstimate {
 
     /// How the gather finishes its pixels (`fused_gather`).
     pub fn passes(&self) -> GatherPasses {
-        self.passes
+        self.pipelines.passes
     }
 
     /// Binds the bundle buffers of a new iteration (after its fragment list grew).
     pub fn rebind_gather(&mut self, device: &wgpu::Device, gather: &GatherBuffers) {
-        self.gather_group = Self::gather_group(device, &self.built, Some(gather));
+        self.gather_group = Self::gather_group(device, &self.pipelines.built, Some(gather));
     }
 
     /// Records one estimate of every pixel's emission and direct light, Le + D (reads the
     /// camera item buffer and the light windows of this pass).
     pub fn record_direct(&self, encoder: &mut wgpu::CommandEncoder) {
-        self.record(encoder, "direct", &self.direct_pipeline, 0);
+        self.record(encoder, "direct", &self.pipelines.direct, 0);
     }
 
     /// Records one estimate of the indirect light G of the pixels of the last bundle's class
@@ -470,11 +446,11 @@ impl ImageEstimate {
     /// The gather's passes, from the pipelines this estimate was built with: the list passes
     /// are those it has a pipeline for (none where the gather is fused).
     fn passes_of_gather(&self) -> Vec<GatherPass<'_>> {
-        let mut passes = vec![GatherPass::Main { lists: self.edges_pipeline.is_some() }];
-        if let GatherPasses::Split { list_workgroups } = self.passes {
+        let mut passes = vec![GatherPass::Main { lists: self.pipelines.edges.is_some() }];
+        if let GatherPasses::Split { list_workgroups } = self.pipelines.passes {
             let lists = [
-                ("gather_edges", "firstshot.image_estimate.gather_edges", &self.edges_pipeline),
-                ("gather_first_bounce", "firstshot.image_estimate.gather_first_bounce", &self.first_bounce_pipeline),
+                ("gather_edges", "firstshot.image_estimate.gather_edges", &self.pipelines.edges),
+                ("gather_first_bounce", "firstshot.image_estimate.gather_first_bounce", &self.pipelines.first_bounce),
             ];
             passes.extend(lists.into_iter().filter_map(|(name, label, pipeline)| {
                 pipeline.as_ref().map(|pipeline| GatherPass::List {
@@ -503,7 +479,7 @@ impl ImageEstimate {
                 kernel::dispatch(
                     encoder,
                     "firstshot.image_estimate.gather",
-                    &self.gather_pipeline,
+                    &self.pipelines.gather,
                     &bind_groups,
                     groups,
                 );
