@@ -34,3 +34,10 @@ pub mod merge;
 pub mod render;
 pub mod rng;
 pub mod stages;
+
+/// The result of a scoped thread, its panic raised again on the joining thread (the
+/// renderer's host work beside the device's: the adapter's opening, the burn-in's walk, the
+/// image's pipelines).
+pub(crate) fn joined<T>(handle: std::thread::ScopedJoinHandle<'_, T>) -> T {
+    handle.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+}

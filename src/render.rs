@@ -924,10 +924,7 @@ impl<'a> Renderer<'a> {
             let pipelines =
                 s.spawn(|| ImagePipelines::build(&ctx.device, paging, &scene_constants, &lights, per_point, passes));
             let first_shot = Self::first_shot_of(ctx, &mut buffers, patches, options, hemicube_resolution, hooks);
-            fn join<T>(t: std::thread::ScopedJoinHandle<'_, T>) -> T {
-                t.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
-            }
-            (join(walk), join(pipelines), first_shot)
+            (crate::joined(walk), crate::joined(pipelines), first_shot)
         });
         let first_shot = first_shot?;
         let iteration = if options.iterations == 0 {

@@ -309,7 +309,7 @@ impl Context {
         std::thread::scope(|s| {
             let opening = s.spawn(|| Context::new(choice));
             let done = work();
-            let ctx = opening.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            let ctx = crate::joined(opening);
             (ctx, done)
         })
     }

@@ -266,14 +266,11 @@ impl ImagePipelines {
             let edges = split.then(|| build("gather_edges", &per_point));
             // The direct light at the near senders' points, compiled like `direct`.
             let first_bounce = (split && first_bounce_per_point).then(|| build("gather_first_bounce", &lights));
-            let join = |t: std::thread::ScopedJoinHandle<'_, wgpu::ComputePipeline>| {
-                t.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
-            };
             ImagePipelines {
-                direct: join(direct),
-                gather: join(gather),
-                edges: edges.map(join),
-                first_bounce: first_bounce.map(join),
+                direct: crate::joined(direct),
+                gather: crate::joined(gather),
+                edges: edges.map(crate::joined),
+                first_bounce: first_bounce.map(crate::joined),
                 built: built.clone(),
                 passes,
             }
