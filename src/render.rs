@@ -164,6 +164,10 @@ pub struct RenderOptions {
     pub cull_raster: bool,
     /// How the area lights' per-pixel visibility is found (`--light-visibility`).
     pub light_visibility: crate::direct_light::LightVisibility,
+    /// Whether the shadow rays are left out where a patch sees a whole area light past every
+    /// occluder (`direct_light::unshadowed`): the same image, fewer rays. Off only to
+    /// compare.
+    pub light_shafts: bool,
 }
 
 impl RenderOptions {
@@ -195,6 +199,7 @@ impl RenderOptions {
             camera_supersample: None,
             cull_raster: true,
             light_visibility: Default::default(),
+            light_shafts: true,
         }
     }
 
@@ -366,6 +371,11 @@ pub struct RenderStats {
     /// How the area lights' and emitting shapes' visibility was found: "rays" or "windows"
     /// (`--light-visibility`; windows where the scene's BVH does not fit the device).
     pub light_visibility: &'static str,
+    /// With shadow rays: how many patches see some area light past every occluder, whose
+    /// pixels cast no ray to it (`direct_light::ShaftJob`), and the host milliseconds the
+    /// search took beside the first shot; null where it was not run.
+    pub unshadowed_patches: Option<u64>,
+    pub unshadowed_ms: Option<f64>,
     /// The memory predicted before any GPU work, and the peak resident set reached
     /// (`memory::MemoryPlan`).
     pub memory: crate::memory::MemoryPlan,
@@ -909,23 +919,34 @@ impl<'a> Renderer<'a> {
         let mut buffers = SceneBuffers::with_pages(device, scene, patches, options.first_shot, page);
         buffers.raster.cull = options.cull_raster;
         let upload_ms = milliseconds(upload);
-        let direct = DirectLights::new(ctx, scene, patches, &buffers, options);
+        let mut direct = DirectLights::new(ctx, scene, patches, &buffers, options);
+        let shaft_job = direct.take_shaft_job();
         // Only where the image gathers (an iteration) and there are lights to evaluate.
         let per_point = options.iterations > 0 && first_bounce_per_point(options, patches) && direct.count() > 0;
-        // Two pieces of host work run on threads of their own while the device does the first
-        // shot: the walk over the patches that sizes the burn-in (src/burn_in.rs, tens of ms),
-        // and the image estimate's pipelines, which a CPU adapter compiles on the threads
+        // Three pieces of host work run on threads of their own while the device does the
+        // first shot: the walk over the patches that sizes the burn-in (src/burn_in.rs, tens
+        // of ms), the image estimate's pipelines, which a CPU adapter compiles on the threads
         // that ask for them (about 80 ms on two cores for the Sierpinski scene, when the
-        // device sat idle).
+        // device sat idle), and the search for the patches that see an area light past every
+        // occluder (`direct_light::ShaftJob`: their pixels cast no shadow ray).
         let (paging, scene_constants, lights) = (buffers.paging(), buffers.constants(), direct.specialization());
         let passes = crate::stages::image_estimate::fused_gather(&ctx.summary, options.gather);
-        let (burn_in_walk, image_pipelines, first_shot) = std::thread::scope(|s| {
+        let (burn_in_walk, image_pipelines, shaft_bits, first_shot) = std::thread::scope(|s| {
             let walk = s.spawn(|| burn_in_steps(scene, patches, options, per_step));
             let pipelines =
                 s.spawn(|| ImagePipelines::build(&ctx.device, paging, &scene_constants, &lights, per_point, passes));
+            let shafts = shaft_job.map(|job| {
+                s.spawn(move || {
+                    let started = Instant::now();
+                    (job.run(patches), milliseconds(started))
+                })
+            });
             let first_shot = Self::first_shot_of(ctx, &mut buffers, patches, options, hemicube_resolution, hooks);
-            (crate::joined(walk), crate::joined(pipelines), first_shot)
+            (crate::joined(walk), crate::joined(pipelines), shafts.map(crate::joined), first_shot)
         });
+        if let Some((bits, ms)) = shaft_bits {
+            direct.set_unshadowed(&ctx.queue, &bits, ms);
+        }
         let first_shot = first_shot?;
         let iteration = if options.iterations == 0 {
             None
@@ -1435,6 +1456,8 @@ impl<'a> Renderer<'a> {
                 shadow_resolution: self.direct.resolution,
                 shadow_atlas_texels: self.direct.atlas_texels(),
                 light_visibility: self.direct.visibility.name(),
+                unshadowed_patches: self.direct.shaft_stats.map(|(patches, _)| patches),
+                unshadowed_ms: self.direct.shaft_stats.map(|(_, ms)| ms),
                 memory: crate::memory::MemoryPlan { peak_rss_bytes: crate::memory::peak_rss(), ..self.memory.clone() },
                 bundle_resolution: self.bundle_resolution,
                 bundles_per_step: self.per_step,

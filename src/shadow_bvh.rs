@@ -18,7 +18,7 @@
 
 use crate::gpu::scene_buffers::RasterTriangles;
 use crate::layout::{GpuBvhNode, GpuBvhTriangle};
-use glam::{Vec3, Vec3A};
+use glam::{DVec3, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::triangle::Triangle;
@@ -107,6 +107,197 @@ impl ShadowBvh {
             node = if leaf { node + 1 } else { n.link as usize };
         }
         false
+    }
+}
+
+/// The tree in the form the shafts' test walks it on the host (`ShadowBvh::shafts`): each
+/// node's box and each triangle's corners in scene coordinates, decoded once.
+pub struct ShaftTree<'a> {
+    bvh: &'a ShadowBvh,
+    boxes: Vec<(DVec3, DVec3)>,
+    corners: Vec<[DVec3; 3]>,
+}
+
+impl ShadowBvh {
+    /// The tree ready for `ShaftTree::is_clear`.
+    pub fn shafts(&self) -> ShaftTree<'_> {
+        let (centre, scale) = self.frame;
+        let (centre, inverse) = (centre.as_dvec3(), 1.0 / f64::from(scale));
+        let world = |v: Vec3| centre + v.as_dvec3() * inverse;
+        let boxes = self
+            .nodes
+            .iter()
+            .map(|n| {
+                let (min, max) = unpack_bounds(n.bounds);
+                (world(min), world(max))
+            })
+            .collect();
+        let corners = self
+            .triangles
+            .iter()
+            .map(|t| {
+                let a = Vec3::from_slice(&t.v0).as_dvec3();
+                [a, a + Vec3::from_slice(&t.e1).as_dvec3(), a + Vec3::from_slice(&t.e2).as_dvec3()]
+            })
+            .collect();
+        ShaftTree { bvh: self, boxes, corners }
+    }
+}
+
+impl ShaftTree<'_> {
+    /// Whether no triangle of the tree can cross a segment between two points of the convex
+    /// region `shaft` (the light's and a patch's hull, `Shaft::hull`): so that every shadow
+    /// ray between them would find nothing, and a pixel on the patch needs none for that
+    /// light (`direct_light::unshadowed`). A triangle is left out where one plane separates
+    /// it from the shaft, touching allowed: one of the shaft's faces, or its own plane (which
+    /// leaves out the patch's neighbours in its plane and the light's own triangles, which
+    /// a segment meets only at its ends, where the kernel's test leaves them out too).
+    /// Conservative: a triangle that no plane of those separates counts as crossing, though
+    /// it may miss the shaft.
+    pub fn is_clear(&self, shaft: &Shaft) -> bool {
+        let nodes = &self.bvh.nodes;
+        let mut node = 0usize;
+        while node < nodes.len() {
+            let link = nodes[node].link;
+            let leaf = link & LEAF != 0;
+            let (lo, hi) = self.boxes[node];
+            if !shaft.misses_box(lo, hi) {
+                if !leaf {
+                    node += 1;
+                    continue;
+                }
+                let first = ((link & !LEAF) >> LEAF_COUNT_BITS) as usize;
+                let last = first + (link & LEAF_COUNT_MASK) as usize;
+                if self.corners[first..=last].iter().any(|c| !shaft.misses_triangle(c)) {
+                    return false;
+                }
+            }
+            node = if leaf { node + 1 } else { link as usize };
+        }
+        true
+    }
+}
+
+/// The most points a shaft is the hull of: a light's corners (`direct_light::light_corners`
+/// keeps at most 12) and a patch's three.
+pub const SHAFT_POINTS: usize = 15;
+/// A hull of n points in general position has at most 2n - 4 faces.
+const SHAFT_PLANES: usize = 2 * SHAFT_POINTS - 4;
+
+/// A convex region between a light and a patch: the hull of their corners, as the planes
+/// of its faces (outward unit normal n and offset d: n . p <= d inside) and its box. Fixed
+/// arrays: one is made for every patch and light.
+#[derive(Debug, Clone)]
+pub struct Shaft {
+    points: [DVec3; SHAFT_POINTS],
+    point_count: usize,
+    planes: [(DVec3, f64); SHAFT_PLANES],
+    plane_count: usize,
+    lo: DVec3,
+    hi: DVec3,
+    /// Distances within this of a plane count as on it: a few units in the last place of
+    /// the f32 coordinates the triangles are kept in.
+    tolerance: f64,
+}
+
+impl Shaft {
+    /// The convex hull of `points` (at most SHAFT_POINTS: so the faces are found by trying
+    /// every plane through three of them). `tolerance`: see the field.
+    pub fn hull(points: &[DVec3], tolerance: f64) -> Shaft {
+        assert!(points.len() <= SHAFT_POINTS, "{} points for a shaft", points.len());
+        let mut shaft = Shaft {
+            points: [DVec3::ZERO; SHAFT_POINTS],
+            point_count: points.len(),
+            planes: [(DVec3::ZERO, 0.0); SHAFT_PLANES],
+            plane_count: 0,
+            lo: DVec3::splat(f64::INFINITY),
+            hi: DVec3::splat(f64::NEG_INFINITY),
+            tolerance,
+        };
+        shaft.points[..points.len()].copy_from_slice(points);
+        for &p in points {
+            shaft.lo = shaft.lo.min(p);
+            shaft.hi = shaft.hi.max(p);
+        }
+        let extent = (shaft.hi - shaft.lo).max_element().max(tolerance);
+        for i in 0..points.len() {
+            for j in i + 1..points.len() {
+                for k in j + 1..points.len() {
+                    let normal = (points[j] - points[i]).cross(points[k] - points[i]);
+                    let length = normal.length();
+                    // A plane through three points nearly on a line is no face: its normal
+                    // is rounding.
+                    if length <= 1e-9 * extent * extent {
+                        continue;
+                    }
+                    // A face has every point on one side (within `flat` of it); most planes
+                    // through three points have some on each, found after a few.
+                    let (d, flat) = (normal.dot(points[i]), 1e-9 * extent * length);
+                    let (mut below, mut above) = (false, false);
+                    for p in points {
+                        let s = normal.dot(*p) - d;
+                        below |= s < -flat;
+                        above |= s > flat;
+                        if below && above {
+                            break;
+                        }
+                    }
+                    let face = match (below, above) {
+                        (true, true) => continue,
+                        (_, false) => (normal / length, d / length),
+                        (false, true) => (-normal / length, -d / length),
+                    };
+                    let same = |(m, e): &(DVec3, f64)| m.dot(face.0) > 1.0 - 1e-12 && (e - face.1).abs() <= 1e-9 * extent;
+                    // More faces than a hull can have only where points nearly coincide: the
+                    // ones past the array are left out, which only makes the shaft larger.
+                    if shaft.plane_count < SHAFT_PLANES && !shaft.planes[..shaft.plane_count].iter().any(same) {
+                        shaft.planes[shaft.plane_count] = face;
+                        shaft.plane_count += 1;
+                    }
+                }
+            }
+        }
+        shaft
+    }
+
+    fn planes(&self) -> &[(DVec3, f64)] {
+        &self.planes[..self.plane_count]
+    }
+
+    /// Whether the box [lo, hi] lies outside the shaft, touching allowed.
+    fn misses_box(&self, lo: DVec3, hi: DVec3) -> bool {
+        let t = self.tolerance;
+        if (lo - self.hi).max_element() >= -t || (self.lo - hi).max_element() >= -t {
+            return true;
+        }
+        self.planes().iter().any(|&(n, d)| {
+            // The box's corner farthest into the shaft along -n.
+            let nearest = DVec3::select(n.cmpge(DVec3::ZERO), lo, hi);
+            n.dot(nearest) - d >= -t
+        })
+    }
+
+    /// Whether the triangle lies outside the shaft, touching allowed: one of the shaft's
+    /// planes has it on its outer side, or its own plane has the whole shaft on one side.
+    fn misses_triangle(&self, corners: &[DVec3; 3]) -> bool {
+        let t = self.tolerance;
+        if self.planes().iter().any(|&(n, d)| corners.iter().all(|c| n.dot(*c) - d >= -t)) {
+            return true;
+        }
+        let normal = (corners[1] - corners[0]).cross(corners[2] - corners[0]);
+        let length = normal.length();
+        if length == 0.0 {
+            // A degenerate triangle crosses no segment in the kernel's test (its determinant
+            // is zero).
+            return true;
+        }
+        let n = normal / length;
+        let d = n.dot(corners[0]);
+        let (below, above) = self.points[..self.point_count].iter().fold((0.0f64, 0.0f64), |(b, a), p| {
+            let s = n.dot(*p) - d;
+            (b.min(s), a.max(s))
+        });
+        above <= t || below >= -t
     }
 }
 

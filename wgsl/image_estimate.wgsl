@@ -49,6 +49,7 @@
 @group(1) @binding(3) var pass_atlas: texture_2d<u32>;
 @group(1) @binding(4) var<storage, read> shadow_nodes: array<BvhNode>;
 @group(1) @binding(5) var<storage, read> shadow_triangles: array<BvhTriangle>;
+@group(1) @binding(6) var<storage, read> unshadowed: array<u32>;
 @group(2) @binding(0) var<storage, read> bundle: Bundle;
 
 // The step's bundle, read once by each gather invocation (`this_bundle = bundle`). It is bound
@@ -113,6 +114,9 @@ override SHADOW_FRAME_X: f32 = 0.0;
 override SHADOW_FRAME_Y: f32 = 0.0;
 override SHADOW_FRAME_Z: f32 = 0.0;
 override SHADOW_FRAME_SCALE: f32 = 1.0;
+// Whether `unshadowed` holds, per patch, the area lights it sees past every occluder
+// (`direct_light::unshadowed`): a point on such a patch casts no shadow ray to them.
+override SHADOW_SHAFTS: bool = false;
 
 fn has_light(kind: u32) -> bool {
     return (LIGHT_KINDS & (1u << kind)) != 0u;
@@ -510,6 +514,21 @@ fn emitted_share(m: u32, x: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
     return patches_at(m).emission.rgb * (1.0 - light_share(t * t, cos_l, pick_area));
 }
 
+// Whether x, a point of patch j's plane (normal n), sees all of area light i past every
+// occluder: patch j's bit i (`unshadowed`), where x lies on the patch itself (a pixel's point
+// may lie a little past its patch's edge, and a sender's point farther: those cast their ray).
+fn sees_whole(j: u32, i: u32, x: vec3<f32>, n: vec3<f32>) -> bool {
+    if (!SHADOW_SHAFTS || i >= 32u || ((unshadowed[j] >> i) & 1u) == 0u) {
+        return false;
+    }
+    // Inside the triangle, edges included: x on the inner side of each edge (the corners
+    // run counter-clockwise about n).
+    let a = patches_at(j).v0.xyz;
+    let b = patches_at(j).v1.xyz;
+    let c = patches_at(j).v2.xyz;
+    return dot(cross(b - a, x - a), n) >= 0.0 && dot(cross(c - b, x - b), n) >= 0.0 && dot(cross(a - c, x - c), n) >= 0.0;
+}
+
 // D(x, w_out): every light's direct radiance reflected at x on patch j toward w_out.
 fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
@@ -551,7 +570,7 @@ fn direct_light(j: u32, x: vec3<f32>, n: vec3<f32>, m: Material, w_out: vec3<f32
         var lit = g > 0.0;
         if (lit) {
             if (SHADOW_RAYS && has_light(LIGHT_AREA) && kind == LIGHT_AREA) {
-                lit = !occluded(y, lights[i].normal.xyz, x, n);
+                lit = sees_whole(j, i, x, n) || !occluded(y, lights[i].normal.xyz, x, n);
             } else {
                 lit = visible(y, lights[i].first_face, lights[i].faces, j, n, x);
             }

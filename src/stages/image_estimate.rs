@@ -60,6 +60,9 @@ pub const SPEC: KernelSpec = KernelSpec {
             // lights take rays instead of windows (SHADOW_RAYS).
             read::<crate::layout::GpuBvhNode>("shadow_nodes"),
             read::<crate::layout::GpuBvhTriangle>("shadow_triangles"),
+            // A word a patch: bit i where the patch sees all of area light i past every
+            // occluder (`direct_light::unshadowed`), so its pixels cast no shadow ray to it.
+            read::<u32>("unshadowed"),
         ],
         // The gather (`iteration::GatherBuffers`), after the step's transfer sorted its lines.
         &[
@@ -347,6 +350,7 @@ impl ImageEstimate {
                 ("pass_atlas", direct.pass_atlas().into()),
                 ("shadow_nodes", direct.shadow_nodes().into()),
                 ("shadow_triangles", direct.shadow_triangles().into()),
+                ("unshadowed", direct.unshadowed().into()),
             ],
         );
         let gather_group = Self::gather_group(device, built, gather);
