@@ -398,9 +398,8 @@ impl DirectLights {
         let tolerance = 4.0 * f64::from(f32::EPSILON) * (buffers.centre.abs().max_element() + buffers.radius);
         let shaft_lights = shaft_lights(&sources, tolerance);
         let pixels: u64 = options.views(scene).iter().map(|v| u64::from(v.camera.width) * u64::from(v.camera.height)).sum();
-        let wants_shafts = options.light_shafts
-            && patch_count <= SHAFT_MAX_PATCHES
-            && patch_count as u64 * SHAFT_PIXELS_PER_PATCH <= pixels
+        let pays = patch_count <= SHAFT_MAX_PATCHES && patch_count as u64 * SHAFT_PIXELS_PER_PATCH <= pixels;
+        let wants_shafts = options.light_shafts.unwrap_or(pays)
             && patch_count as u64 * 4 <= binding
             && !shaft_lights.is_empty();
         // The side each face asks for: `--shadow-resolution` for all, else the automatic rule

@@ -165,9 +165,10 @@ pub struct RenderOptions {
     /// How the area lights' per-pixel visibility is found (`--light-visibility`).
     pub light_visibility: crate::direct_light::LightVisibility,
     /// Whether the shadow rays are left out where a patch sees a whole area light past every
-    /// occluder (`direct_light::unshadowed`): the same image, fewer rays. Off only to
-    /// compare.
-    pub light_shafts: bool,
+    /// occluder (`direct_light::ShaftJob`): the same image, fewer rays. `None`: where the
+    /// search pays (`direct_light::SHAFT_PIXELS_PER_PATCH`); set only by tests, which hold
+    /// the image with it against the image without.
+    pub light_shafts: Option<bool>,
 }
 
 impl RenderOptions {
@@ -199,7 +200,7 @@ impl RenderOptions {
             camera_supersample: None,
             cull_raster: true,
             light_visibility: Default::default(),
-            light_shafts: true,
+            light_shafts: None,
         }
     }
 

@@ -635,4 +635,120 @@ mod tests {
     fn test03_an_empty_scene_has_no_tree() {
         assert!(ShadowBvh::build(&RasterTriangles::default()).is_none());
     }
+
+    #[test]
+    fn test07_a_shafts_faces_are_its_hulls() {
+        let d = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
+        // A cube: 6 faces, each counted once though 4 of its corners span each.
+        let cube: Vec<DVec3> = (0..8).map(|k| d((k & 1) as f64, (k >> 1 & 1) as f64, (k >> 2 & 1) as f64)).collect();
+        assert_eq!(Shaft::hull(&cube, 1e-9).planes().len(), 6);
+        // A square light above a triangle: the two planes and 3 + 4 sides where the triangle
+        // lies inside the square's outline (each side plane through a square edge and a
+        // triangle corner, or a triangle edge and a square corner).
+        let mut points = vec![d(-1.0, 2.0, -1.0), d(1.0, 2.0, -1.0), d(1.0, 2.0, 1.0), d(-1.0, 2.0, 1.0)];
+        points.extend([d(-0.2, 0.0, -0.2), d(0.3, 0.0, -0.1), d(0.0, 0.0, 0.3)]);
+        let shaft = Shaft::hull(&points, 1e-9);
+        assert!(shaft.planes().len() >= 5, "{} faces", shaft.planes().len());
+        // Every face has every point on its inner side or on it, and each of the points on
+        // some face.
+        for (n, d) in shaft.planes() {
+            assert!((n.length() - 1.0).abs() < 1e-12);
+            assert!(points.iter().all(|p| n.dot(*p) - d <= 1e-9), "plane {n} {d}");
+        }
+        for p in &points {
+            assert!(shaft.planes().iter().any(|(n, d)| (n.dot(*p) - d).abs() <= 1e-9), "{p} on no face");
+        }
+        // The middle of the shaft is inside every face, a point beside it outside one.
+        let inside = |q: DVec3| shaft.planes().iter().all(|(n, d)| n.dot(q) - d < 0.0);
+        assert!(inside(d(0.0, 1.0, 0.0)));
+        assert!(!inside(d(0.9, 0.2, 0.9)));
+    }
+
+    /// Random points of the triangle with corners `c`, and of the square light below.
+    fn point_of(c: &[DVec3; 3], u: f64, v: f64) -> DVec3 {
+        let (u, v) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+        c[0] + u * (c[1] - c[0]) + v * (c[2] - c[0])
+    }
+
+    #[test]
+    fn test08_a_clear_shaft_has_no_triangle_across_any_of_its_segments() {
+        // The oracle: the segment test against every triangle, no hierarchy, at segments
+        // between random points of the light and of the patch. A cloud of small triangles
+        // in the unit cube, a square light above it and patches below: a patch the search
+        // calls clear must have no blocked segment, and both answers must occur often (a
+        // search that called every shaft blocked would pass the first part).
+        let triangles = cloud(400, 5);
+        let bvh = ShadowBvh::build(&raster(&triangles)).expect("a tree");
+        let tree = bvh.shafts();
+        let brute: Vec<[DVec3; 3]> = triangles.iter().map(|t| t.map(|v| v.as_dvec3())).collect();
+        let light = [DVec3::new(0.3, 1.6, 0.3), DVec3::new(0.7, 1.6, 0.3), DVec3::new(0.7, 1.6, 0.7), DVec3::new(0.3, 1.6, 0.7)];
+        let mut rng = crate::rng::StepRng::new(17, 0);
+        let (mut clear, mut blocked_found) = (0, 0);
+        for _ in 0..300 {
+            // Around the cloud, far enough out that some shafts pass beside it.
+            let (x, z) = (rng.uniform() * 9.0 - 4.0, rng.uniform() * 9.0 - 4.0);
+            let y = -0.3 + 0.2 * rng.uniform();
+            let size = 0.02 + 0.1 * rng.uniform();
+            let patch = [DVec3::new(x, y, z), DVec3::new(x + size, y, z), DVec3::new(x, y, z + size)];
+            let mut points = light.to_vec();
+            points.extend(patch);
+            if !tree.is_clear(&Shaft::hull(&points, 1e-6)) {
+                continue;
+            }
+            clear += 1;
+            for _ in 0..200 {
+                let on_light = point_of(&[light[0], light[1], light[2]], rng.uniform(), rng.uniform());
+                let on_light = if rng.uniform() < 0.5 { on_light } else { light[0] + light[2] - on_light };
+                let on_patch = point_of(&patch, rng.uniform(), rng.uniform());
+                let dir = on_patch - on_light;
+                let hit = brute.iter().any(|t| {
+                    let gpu = GpuBvhTriangle {
+                        v0: t[0].as_vec3().extend(0.0).to_array(),
+                        e1: (t[1] - t[0]).as_vec3().extend(0.0).to_array(),
+                        e2: (t[2] - t[0]).as_vec3().extend(0.0).to_array(),
+                    };
+                    segment_hits(&gpu, on_light.as_vec3(), dir.as_vec3())
+                });
+                assert!(!hit, "a clear shaft's segment {on_light} -> {on_patch} is blocked");
+            }
+        }
+        // Patches under the cloud: the search finds some blocked (every one, for those
+        // whose centre's segment to the light's centre is blocked).
+        for _ in 0..300 {
+            let (x, z) = (rng.uniform(), rng.uniform());
+            let patch = [DVec3::new(x, -0.2, z), DVec3::new(x + 0.05, -0.2, z), DVec3::new(x, -0.2, z + 0.05)];
+            let centre = patch.iter().sum::<DVec3>() / 3.0;
+            let blocked = bvh.occluded(DVec3::new(0.5, 1.6, 0.5).as_vec3(), Vec3::NEG_Y, centre.as_vec3(), Vec3::Y);
+            let mut points = light.to_vec();
+            points.extend(patch);
+            let found = !tree.is_clear(&Shaft::hull(&points, 1e-6));
+            assert!(found || !blocked, "the shaft to {centre} is called clear, its centre's ray is blocked");
+            blocked_found += usize::from(found);
+        }
+        assert!(clear > 60 && blocked_found > 100, "clear {clear}, blocked {blocked_found}");
+    }
+
+    #[test]
+    fn test09_neighbours_in_a_patchs_plane_and_walls_it_touches_leave_its_shaft_clear() {
+        // A floor of two triangles, a wall standing on its edge and a light above: a floor
+        // patch at the wall's foot sees the whole light (the wall touches its shaft along the
+        // edge only, the floor's triangles lie in its plane); a box between the light and
+        // the patch blocks it.
+        let d = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+        let floor = [[d(-2.0, 0.0, -2.0), d(-2.0, 0.0, 2.0), d(2.0, 0.0, 2.0)], [d(-2.0, 0.0, -2.0), d(2.0, 0.0, 2.0), d(2.0, 0.0, -2.0)]];
+        let wall = [[d(-2.0, 0.0, -2.0), d(2.0, 0.0, -2.0), d(2.0, 3.0, -2.0)], [d(-2.0, 0.0, -2.0), d(2.0, 3.0, -2.0), d(-2.0, 3.0, -2.0)]];
+        let light = [DVec3::new(-0.5, 2.9, -0.5), DVec3::new(0.5, 2.9, -0.5), DVec3::new(0.5, 2.9, 0.5), DVec3::new(-0.5, 2.9, 0.5)];
+        let patch = [DVec3::new(0.0, 0.0, -2.0), DVec3::new(0.0, 0.0, -1.7), DVec3::new(0.3, 0.0, -2.0)];
+        let shaft = |triangles: &[[Vec3; 3]]| {
+            let bvh = ShadowBvh::build(&raster(triangles)).expect("a tree");
+            let mut points = light.to_vec();
+            points.extend(patch);
+            bvh.shafts().is_clear(&Shaft::hull(&points, 1e-6))
+        };
+        let room: Vec<[Vec3; 3]> = floor.iter().chain(&wall).copied().collect();
+        assert!(shaft(&room), "the floor and the wall block nothing");
+        let mut with_box = room.clone();
+        with_box.push([d(-0.2, 0.5, -2.0), d(0.6, 0.5, -2.0), d(0.1, 0.5, -1.2)]);
+        assert!(!shaft(&with_box), "a triangle between the patch and the light blocks it");
+    }
 }

@@ -1257,3 +1257,40 @@ fn test24_the_whole_pipeline_far_from_the_origin_renders_what_it_renders_at_it()
     eprintln!("moved ({}) from the origin: relative RMSE {rmse:.5}, ratio of means {ratio:.5}", by);
     assert!(rmse < 0.003 && (ratio - 1.0).abs() < 0.001, "relative RMSE {rmse}, ratio of means {ratio}");
 }
+
+#[test]
+fn test25_shadow_rays_left_out_where_nothing_can_block_them_change_no_pixel() {
+    // A patch that sees a whole area light past every occluder (`direct_light::ShaftJob`: no
+    // triangle crosses the hull of the light and the patch) casts no shadow ray to it; every
+    // such ray would have found nothing, so the image is the same to the bit. Held on test21's
+    // cracked square over a floor (most of the floor sees the whole light, the square and the
+    // floor below it do not), direct light alone and with the iteration (whose near senders'
+    // first bounce asks the same rays); and on the Cornell box. The search is asked for in
+    // both, whatever the automatic rule would say of these small images.
+    let Some(ctx) = common::gpu() else { return };
+    let head = format!(
+        "{FLOOR_UNDER_OCCLUDER}[[lights]]\ntype = \"area\"\nvertices = [[-0.05, 1.8, -0.05], [0.05, 1.8, -0.05], [0.05, 1.8, 0.05], [-0.05, 1.8, 0.05]]\n\
+        radiance = [400.0, 400.0, 400.0]\nsubdivisions = 1\n"
+    );
+    let (_scratch, square) = load("shafts_cracked_occluder", &cracked_square(&head));
+    let cornell_text = std::fs::read_to_string(common::scenes::shipped("cornell_box")).unwrap();
+    let (_scratch_cb, cornell) = load("shafts_cornell", &cornell_text);
+    for (name, scene, iterations, size) in [("square", &square, 0, 40), ("square", &square, 4, 40), ("cornell_box", &cornell, 4, 48)] {
+        let patches = scene::tessellate(scene, scene.settings.patch_size).unwrap();
+        let rendered = |shafts: bool| {
+            let mut options = RenderOptions::from_scene(scene);
+            (options.width, options.height, options.iterations, options.direct_passes) = (size, size, iterations, 16);
+            options.light_shafts = Some(shafts);
+            render(&ctx, scene, &patches, &options).unwrap()
+        };
+        let (with, without) = (rendered(true), rendered(false));
+        assert_eq!(without.stats.unshadowed_patches, None);
+        let clear = with.stats.unshadowed_patches.expect("the search ran");
+        let share = clear as f64 / patches.patches.len() as f64;
+        eprintln!("{name}, {iterations} steps: {clear} of {} patches see the whole light", patches.patches.len());
+        // Most of the floor (and of the Cornell box's walls) sees the whole light.
+        assert!(share > 0.3, "{name}: {clear} of {} patches", patches.patches.len());
+        let differing = with.image.pixels.iter().zip(&without.image.pixels).filter(|(a, b)| a != b).count();
+        assert_eq!(differing, 0, "{name}, {iterations} steps: {differing} pixels differ");
+    }
+}
