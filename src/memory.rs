@@ -179,13 +179,14 @@ pub fn predict(
     let shadow_texels =
         crate::direct_light::SHADOW_TEXEL_BUDGET.min(face * (6 * scene.lights.len() as u64 + 10 * suns));
     // The shadow rays' BVH (`shadow_bvh`), where area lights or emitting shapes take rays: a
-    // triangle (48 bytes) and at most two nodes (16 bytes each) a rasterised triangle. The
-    // windows' texels above stay counted: a BVH that does not fit falls back to them.
+    // triangle (48 bytes) and at most two nodes (16 bytes each) a rasterised triangle, and a
+    // word a patch for the lights it sees past every occluder (`direct_light::ShaftJob`).
+    // The windows' texels above stay counted: a BVH that does not fit falls back to them.
     let shadow_bvh_bytes = match options.light_visibility {
         crate::direct_light::LightVisibility::Rays
             if options.first_shot && crate::direct_light::has_moving_lights(scene, patches) =>
         {
-            crate::gpu::scene_buffers::raster_triangle_count(patches) * (48 + 2 * 16)
+            crate::gpu::scene_buffers::raster_triangle_count(patches) * (48 + 2 * 16) + n * 4
         }
         _ => 0,
     };

@@ -247,7 +247,8 @@ impl Shaft {
                         (_, false) => (normal / length, d / length),
                         (false, true) => (-normal / length, -d / length),
                     };
-                    let same = |(m, e): &(DVec3, f64)| m.dot(face.0) > 1.0 - 1e-12 && (e - face.1).abs() <= 1e-9 * extent;
+                    let same =
+                        |(m, e): &(DVec3, f64)| m.dot(face.0) > 1.0 - 1e-12 && (e - face.1).abs() <= 1e-9 * extent;
                     // More faces than a hull can have only where points nearly coincide: the
                     // ones past the array are left out, which only makes the shaft larger.
                     if shaft.plane_count < SHAFT_PLANES && !shaft.planes[..shaft.plane_count].iter().any(same) {
@@ -681,7 +682,12 @@ mod tests {
         let bvh = ShadowBvh::build(&raster(&triangles)).expect("a tree");
         let tree = bvh.shafts();
         let brute: Vec<[DVec3; 3]> = triangles.iter().map(|t| t.map(|v| v.as_dvec3())).collect();
-        let light = [DVec3::new(0.3, 1.6, 0.3), DVec3::new(0.7, 1.6, 0.3), DVec3::new(0.7, 1.6, 0.7), DVec3::new(0.3, 1.6, 0.7)];
+        let light = [
+            DVec3::new(0.3, 1.6, 0.3),
+            DVec3::new(0.7, 1.6, 0.3),
+            DVec3::new(0.7, 1.6, 0.7),
+            DVec3::new(0.3, 1.6, 0.7),
+        ];
         let mut rng = crate::rng::StepRng::new(17, 0);
         let (mut clear, mut blocked_found) = (0, 0);
         for _ in 0..300 {
@@ -735,9 +741,20 @@ mod tests {
         // edge only, the floor's triangles lie in its plane); a box between the light and
         // the patch blocks it.
         let d = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
-        let floor = [[d(-2.0, 0.0, -2.0), d(-2.0, 0.0, 2.0), d(2.0, 0.0, 2.0)], [d(-2.0, 0.0, -2.0), d(2.0, 0.0, 2.0), d(2.0, 0.0, -2.0)]];
-        let wall = [[d(-2.0, 0.0, -2.0), d(2.0, 0.0, -2.0), d(2.0, 3.0, -2.0)], [d(-2.0, 0.0, -2.0), d(2.0, 3.0, -2.0), d(-2.0, 3.0, -2.0)]];
-        let light = [DVec3::new(-0.5, 2.9, -0.5), DVec3::new(0.5, 2.9, -0.5), DVec3::new(0.5, 2.9, 0.5), DVec3::new(-0.5, 2.9, 0.5)];
+        let floor = [
+            [d(-2.0, 0.0, -2.0), d(-2.0, 0.0, 2.0), d(2.0, 0.0, 2.0)],
+            [d(-2.0, 0.0, -2.0), d(2.0, 0.0, 2.0), d(2.0, 0.0, -2.0)],
+        ];
+        let wall = [
+            [d(-2.0, 0.0, -2.0), d(2.0, 0.0, -2.0), d(2.0, 3.0, -2.0)],
+            [d(-2.0, 0.0, -2.0), d(2.0, 3.0, -2.0), d(-2.0, 3.0, -2.0)],
+        ];
+        let light = [
+            DVec3::new(-0.5, 2.9, -0.5),
+            DVec3::new(0.5, 2.9, -0.5),
+            DVec3::new(0.5, 2.9, 0.5),
+            DVec3::new(-0.5, 2.9, 0.5),
+        ];
         let patch = [DVec3::new(0.0, 0.0, -2.0), DVec3::new(0.0, 0.0, -1.7), DVec3::new(0.3, 0.0, -2.0)];
         let shaft = |triangles: &[[Vec3; 3]]| {
             let bvh = ShadowBvh::build(&raster(triangles)).expect("a tree");

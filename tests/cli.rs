@@ -148,7 +148,7 @@ fn test03_no_first_shot_with_a_point_light_is_a_usage_error() {
 }
 
 /// The stats keys of CLI.md.
-const STATS_KEYS: [&str; 19] = [
+const STATS_KEYS: [&str; 21] = [
     "adapter",
     "patches",
     "memory",
@@ -161,6 +161,8 @@ const STATS_KEYS: [&str; 19] = [
     "bundle_lines",
     "gather",
     "light_visibility",
+    "unshadowed_patches",
+    "unshadowed_ms",
     "first_shot",
     "first_shot_ms",
     "iterations",
@@ -235,6 +237,9 @@ fn test04_tiny_render_writes_exr_png_and_stats() {
     // The Cornell box's area light takes shadow rays (the default), so it has no window.
     assert_eq!(json["light_visibility"], "rays");
     assert_eq!(json["shadow_atlas_texels"], 0, "{text}");
+    // A 32 x 32 image has fewer pixels than twice the 6065 patches: no search for the
+    // patches that see the whole light (direct_light::SHAFT_PIXELS_PER_PATCH).
+    assert!(json["unshadowed_patches"].is_null() && json["unshadowed_ms"].is_null(), "{text}");
     assert_eq!(json["iterations"], 0);
     assert_eq!(json["notes"], serde_json::json!([]), "the Cornell box has nothing to note");
     assert!(json["patches"].as_u64().is_some_and(|n| n > 0), "{text}");

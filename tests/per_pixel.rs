@@ -1275,7 +1275,9 @@ fn test25_shadow_rays_left_out_where_nothing_can_block_them_change_no_pixel() {
     let (_scratch, square) = load("shafts_cracked_occluder", &cracked_square(&head));
     let cornell_text = std::fs::read_to_string(common::scenes::shipped("cornell_box")).unwrap();
     let (_scratch_cb, cornell) = load("shafts_cornell", &cornell_text);
-    for (name, scene, iterations, size) in [("square", &square, 0, 40), ("square", &square, 4, 40), ("cornell_box", &cornell, 4, 48)] {
+    for (name, scene, iterations, size) in
+        [("square", &square, 0, 40), ("square", &square, 4, 40), ("cornell_box", &cornell, 4, 48)]
+    {
         let patches = scene::tessellate(scene, scene.settings.patch_size).unwrap();
         let rendered = |shafts: bool| {
             let mut options = RenderOptions::from_scene(scene);
