@@ -148,7 +148,7 @@ impl ShaftTree<'_> {
     /// Whether no triangle of the tree can cross a segment between two points of the convex
     /// region `shaft` (the light's and a patch's hull, `Shaft::hull`): so that every shadow
     /// ray between them would find nothing, and a pixel on the patch needs none for that
-    /// light (`direct_light::unshadowed`). A triangle is left out where one plane separates
+    /// light (`direct_light::ShaftJob`). A triangle is left out where one plane separates
     /// it from the shaft, touching allowed: one of the shaft's faces, or its own plane (which
     /// leaves out the patch's neighbours in its plane and the light's own triangles, which
     /// a segment meets only at its ends, where the kernel's test leaves them out too).

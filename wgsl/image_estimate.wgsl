@@ -115,7 +115,7 @@ override SHADOW_FRAME_Y: f32 = 0.0;
 override SHADOW_FRAME_Z: f32 = 0.0;
 override SHADOW_FRAME_SCALE: f32 = 1.0;
 // Whether `unshadowed` holds, per patch, the area lights it sees past every occluder
-// (`direct_light::unshadowed`): a point on such a patch casts no shadow ray to them.
+// (`direct_light::ShaftJob`): a point on such a patch casts no shadow ray to them.
 override SHADOW_SHAFTS: bool = false;
 
 fn has_light(kind: u32) -> bool {

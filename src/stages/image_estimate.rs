@@ -61,7 +61,7 @@ pub const SPEC: KernelSpec = KernelSpec {
             read::<crate::layout::GpuBvhNode>("shadow_nodes"),
             read::<crate::layout::GpuBvhTriangle>("shadow_triangles"),
             // A word a patch: bit i where the patch sees all of area light i past every
-            // occluder (`direct_light::unshadowed`), so its pixels cast no shadow ray to it.
+            // occluder (`direct_light::ShaftJob`), so its pixels cast no shadow ray to it.
             read::<u32>("unshadowed"),
         ],
         // The gather (`iteration::GatherBuffers`), after the step's transfer sorted its lines.
