@@ -399,7 +399,8 @@ impl DirectLights {
         let shaft_lights = shaft_lights(&sources, tolerance);
         let pixels: u64 =
             options.views(scene).iter().map(|v| u64::from(v.camera.width) * u64::from(v.camera.height)).sum();
-        let pays = patch_count <= SHAFT_MAX_PATCHES && patch_count as u64 * SHAFT_PIXELS_PER_PATCH <= pixels;
+        let pairs = patch_count as u64 * shaft_lights.len() as u64;
+        let pays = pairs <= SHAFT_MAX_PAIRS && patch_count as u64 * SHAFT_PIXELS_PER_PATCH <= pixels;
         let wants_shafts =
             options.light_shafts.unwrap_or(pays) && patch_count as u64 * 4 <= binding && !shaft_lights.is_empty();
         // The side each face asks for: `--shadow-resolution` for all, else the automatic rule
@@ -711,10 +712,11 @@ fn non_empty<T: bytemuck::Pod + bytemuck::Zeroable>(items: &[T]) -> Vec<T> {
 /// has a bit for each of the first 32.
 pub const SHAFT_LIGHTS: usize = 32;
 
-/// Past this many patches the search is not run (every pixel keeps its shadow rays): about
-/// a microsecond a patch and light on one core of the 2-core machine here
-/// (docs/PERFORMANCE.md, "Shadow rays left out where nothing can block them").
-pub const SHAFT_MAX_PATCHES: usize = 1 << 20;
+/// Past this many (patch, light) pairs the search is not run (every pixel keeps its shadow
+/// rays): it costs about a microsecond a pair on one core of the 2-core machine here
+/// (docs/PERFORMANCE.md, "Shadow rays left out where nothing can block them"), and the render
+/// waits for it after the first shot.
+pub const SHAFT_MAX_PAIRS: u64 = 1 << 20;
 
 /// The search runs where the views have at least this many pixels a patch. It costs about
 /// 1.5 us of host time a patch; a direct-light pass on lavapipe about 0.1 us a pixel whose
