@@ -396,13 +396,13 @@ impl DirectLights {
         let binding = ctx.limits().max_storage_buffer_binding_size;
         let patch_count = patches.patches.len();
         let tolerance = 4.0 * f64::from(f32::EPSILON) * (buffers.centre.abs().max_element() + buffers.radius);
-        let shaft_lights = shaft_lights(&sources, tolerance);
-        let pixels: u64 =
-            options.views(scene).iter().map(|v| u64::from(v.camera.width) * u64::from(v.camera.height)).sum();
-        let pairs = patch_count as u64 * shaft_lights.len() as u64;
-        let pays = pairs <= SHAFT_MAX_PAIRS && patch_count as u64 * SHAFT_PIXELS_PER_PATCH <= pixels;
+        // The lights' hulls are found only where the search runs (`shaft_lights`).
+        let area_sources = sources.iter().take(SHAFT_LIGHTS).filter(|(s, _)| matches!(s, Source::Area { .. })).count();
+        let pairs = patch_count as u64 * area_sources as u64;
+        let pays =
+            pairs <= SHAFT_MAX_PAIRS && patch_count as u64 * SHAFT_PIXELS_PER_PATCH <= options.view_pixels(scene);
         let wants_shafts =
-            options.light_shafts.unwrap_or(pays) && patch_count as u64 * 4 <= binding && !shaft_lights.is_empty();
+            options.light_shafts.unwrap_or(pays) && patch_count as u64 * 4 <= binding && area_sources > 0;
         // The side each face asks for: `--shadow-resolution` for all, else the automatic rule
         // per face where a window keeps its orientation (point and spot lights, an area light:
         // `auto_face_sides`), the whole scene's rule for the rest (an emitting shape's window
@@ -562,7 +562,7 @@ impl DirectLights {
             shaft_stats: None,
         };
         if shafts {
-            out.shaft_job = bvh.map(|bvh| ShaftJob { bvh, lights: shaft_lights, tolerance });
+            out.shaft_job = bvh.map(|bvh| ShaftJob { bvh, lights: shaft_lights(&out.lights, tolerance), tolerance });
         }
         let kept_faces = out.faces_in(KEPT);
         if !kept_faces.is_empty() {
@@ -727,12 +727,12 @@ pub const SHAFT_MAX_PAIRS: u64 = 1 << 20;
 pub const SHAFT_PIXELS_PER_PATCH: u64 = 2;
 
 /// The area sources that get bits: (light-table index, the corners of their hull).
-fn shaft_lights(sources: &[(Source, DVec3)], tolerance: f64) -> Vec<(usize, Vec<DVec3>)> {
-    sources
+fn shaft_lights(lights: &[Planned], tolerance: f64) -> Vec<(usize, Vec<DVec3>)> {
+    lights
         .iter()
         .enumerate()
         .take(SHAFT_LIGHTS)
-        .filter_map(|(i, (source, _))| match source {
+        .filter_map(|(i, light)| match &light.source {
             Source::Area { triangles, .. } => Some((i, light_corners(triangles.iter().map(|t| t.0), tolerance))),
             _ => None,
         })
@@ -783,29 +783,39 @@ impl ShaftJob {
 }
 
 /// The points whose hull is a light's: the corners of its triangles, fewer where they lie
-/// in one plane (the hull of the polygon in that plane: a subdivided quad's four corners),
-/// else all of them up to 12, else the corners of their box (a larger hull: fewer bits).
+/// in one plane (the hull of the polygon in that plane: a subdivided quad's four corners; a
+/// polygon of more than 12, the rectangle about it in its plane), else all of them up to 12,
+/// else the corners of their box (a larger hull: fewer bits). Linear in the corners but for
+/// the planar hull's sort: an emitting mesh may have many.
 fn light_corners(triangles: impl Iterator<Item = [DVec3; 3]>, tolerance: f64) -> Vec<DVec3> {
-    let mut points: Vec<DVec3> = Vec::new();
-    for p in triangles.flatten() {
-        if !points.iter().any(|q| q.distance_squared(p) <= tolerance * tolerance) {
-            points.push(p);
+    let all: Vec<DVec3> = triangles.flatten().collect();
+    // The distinct corners, up to 13: past 12 their number no longer matters.
+    let mut distinct: Vec<DVec3> = Vec::new();
+    for &p in &all {
+        if distinct.len() > 12 {
+            break;
+        }
+        if !distinct.iter().any(|q| q.distance_squared(p) <= tolerance * tolerance) {
+            distinct.push(p);
         }
     }
-    if points.len() < 3 {
-        return points;
+    if distinct.len() < 3 {
+        return distinct;
     }
-    // A plane through the first point and the two that span the largest triangle with it.
-    let (first, all) = (points[0], &points);
+    // A plane through the first corner, the one farthest from it, and the one farthest from
+    // the line of those two.
+    let first = all[0];
+    let far = all.iter().copied().max_by(|a, b| a.distance_squared(first).total_cmp(&b.distance_squared(first)));
+    let far = far.unwrap_or(first);
     let normal = all
         .iter()
-        .flat_map(|a| all.iter().map(move |b| (*a - first).cross(*b - first)))
+        .map(|p| (far - first).cross(*p - first))
         .max_by(|a, b| a.length_squared().total_cmp(&b.length_squared()))
         .unwrap_or(DVec3::ZERO);
     if normal.length_squared() > 0.0 {
         let n = normal.normalize();
-        if points.iter().all(|p| n.dot(*p - points[0]).abs() <= tolerance) {
-            let hull = planar_hull(&points, n);
+        if all.iter().all(|p| n.dot(*p - first).abs() <= tolerance) {
+            let hull = planar_hull(&all, n);
             if hull.len() <= 12 {
                 return hull;
             }
@@ -815,16 +825,16 @@ fn light_corners(triangles: impl Iterator<Item = [DVec3; 3]>, tolerance: f64) ->
                 let q = DVec3::new(u.dot(*p), v.dot(*p), 0.0);
                 (lo.min(q), hi.max(q))
             });
-            let height = n.dot(points[0]);
+            let height = n.dot(first);
             return [(lo.x, lo.y), (hi.x, lo.y), (hi.x, hi.y), (lo.x, hi.y)]
                 .map(|(a, b)| a * u + b * v + height * n)
                 .to_vec();
         }
     }
-    if points.len() <= 12 {
-        return points;
+    if distinct.len() <= 12 {
+        return distinct;
     }
-    let (lo, hi) = points.iter().fold((points[0], points[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let (lo, hi) = all.iter().fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     let mut corners: Vec<DVec3> = Vec::new();
     for k in 0..8 {
         let c = DVec3::new(
@@ -862,4 +872,86 @@ fn planar_hull(points: &[DVec3], n: DVec3) -> Vec<DVec3> {
         hull.pop();
     }
     hull.into_iter().map(|(_, _, p)| p).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn d(x: f64, y: f64, z: f64) -> DVec3 {
+        DVec3::new(x, y, z)
+    }
+
+    /// Whether `corners` has a point within 1e-9 of `p`.
+    fn has(corners: &[DVec3], p: DVec3) -> bool {
+        corners.iter().any(|c| c.distance(p) < 1e-9)
+    }
+
+    #[test]
+    fn test01_a_lights_hull_keeps_its_outline() {
+        // A quad light cut 2 x 2 (8 triangles, 9 corners, as the tessellation makes it): its
+        // four outer corners alone.
+        let at = |i: usize, k: usize| d(-0.4 + 0.4 * i as f64, 3.98, 0.4 * k as f64);
+        let mut quad = Vec::new();
+        for i in 0..2 {
+            for k in 0..2 {
+                quad.push([at(i, k), at(i + 1, k), at(i + 1, k + 1)]);
+                quad.push([at(i, k), at(i + 1, k + 1), at(i, k + 1)]);
+            }
+        }
+        let corners = light_corners(quad.into_iter(), 1e-9);
+        assert_eq!(corners.len(), 4, "{corners:?}");
+        for p in [at(0, 0), at(2, 0), at(2, 2), at(0, 2)] {
+            assert!(has(&corners, p), "{p} missing from {corners:?}");
+        }
+        // A disc of 64 fan triangles in a tilted plane: the rectangle about it, in its plane,
+        // holding every rim point.
+        let (u, v) = (d(1.0, 1.0, 0.0).normalize(), d(0.0, 0.0, 1.0));
+        let rim = |k: usize| {
+            let a = std::f64::consts::TAU * k as f64 / 64.0;
+            d(5.0, 1.0, 2.0) + a.cos() * u + a.sin() * v
+        };
+        let centre = d(5.0, 1.0, 2.0);
+        let corners = light_corners((0..64).map(|k| [centre, rim(k), rim(k + 1)]), 1e-9);
+        assert_eq!(corners.len(), 4, "{corners:?}");
+        let n = u.cross(v);
+        for c in &corners {
+            assert!(n.dot(*c - centre).abs() < 1e-9, "{c} off the disc's plane");
+        }
+        let (cu, cv) = (corners.iter().map(|c| u.dot(*c - centre)), corners.iter().map(|c| v.dot(*c - centre)));
+        let (lo_u, hi_u) = cu.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| (l.min(x), h.max(x)));
+        let (lo_v, hi_v) = cv.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| (l.min(x), h.max(x)));
+        for k in 0..64 {
+            let (a, b) = (u.dot(rim(k) - centre), v.dot(rim(k) - centre));
+            assert!(a >= lo_u - 1e-9 && a <= hi_u + 1e-9 && b >= lo_v - 1e-9 && b <= hi_v + 1e-9, "rim {k} outside");
+        }
+        // A closed box of 12 triangles (8 corners, not in one plane): its corners; an
+        // emitting sphere of many: the 8 corners of its box.
+        let cube = |k: usize| d((k & 1) as f64, (k >> 1 & 1) as f64, (k >> 2 & 1) as f64);
+        let faces = [
+            [0, 1, 3],
+            [0, 3, 2],
+            [4, 6, 7],
+            [4, 7, 5],
+            [0, 4, 5],
+            [0, 5, 1],
+            [2, 3, 7],
+            [2, 7, 6],
+            [0, 2, 6],
+            [0, 6, 4],
+            [1, 5, 7],
+            [1, 7, 3],
+        ];
+        let corners = light_corners(faces.iter().map(|f| f.map(cube)), 1e-9);
+        assert_eq!(corners.len(), 8);
+        assert!((0..8).all(|k| has(&corners, cube(k))));
+        let point = |i: usize, j: usize| {
+            let (t, p) = (std::f64::consts::PI * i as f64 / 16.0, std::f64::consts::TAU * j as f64 / 32.0);
+            d(t.sin() * p.cos(), t.cos(), t.sin() * p.sin())
+        };
+        let sphere = (0..16).flat_map(|i| (0..32).map(move |j| [point(i, j), point(i + 1, j), point(i + 1, j + 1)]));
+        let corners = light_corners(sphere, 1e-9);
+        assert_eq!(corners.len(), 8, "{corners:?}");
+        assert!(corners.iter().all(|c| (c.abs() - DVec3::ONE).abs().max_element() < 1e-9), "{corners:?}");
+    }
 }

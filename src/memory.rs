@@ -134,7 +134,7 @@ pub fn predict(
     let host_bytes_per_patch =
         (size_of::<crate::scene::Patch>() + size_of::<crate::scene::Piece>()) as u64 + UPLOAD_BYTES_PER_PATCH;
     let views = options.views(scene);
-    let pixels: u64 = views.iter().map(|v| v.camera.width as u64 * v.camera.height as u64).sum();
+    let pixels = options.view_pixels(scene);
     // A supersampled camera item buffer's texels past one a pixel (id and depth, 8 bytes).
     let supersampled_camera_bytes: u64 = views
         .iter()

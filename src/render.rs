@@ -276,6 +276,11 @@ impl RenderOptions {
         let camera = Camera { width: self.width, height: self.height, ..scene.camera };
         vec![NamedCamera { name: "camera".into(), camera }]
     }
+
+    /// The pixels of all the render's views together.
+    pub fn view_pixels(&self, scene: &Scene) -> u64 {
+        self.views(scene).iter().map(|v| u64::from(v.camera.width) * u64::from(v.camera.height)).sum()
+    }
 }
 
 /// Whether the image's gather evaluates a near sender's first reflection of the first-shot
