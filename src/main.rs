@@ -645,7 +645,7 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         patches.patches.len(),
         patches.samples.len()
     ));
-    for note in &patches.notes {
+    for note in patches.notes.iter().chain(&options.coarse_bundle_note(&scene, &patches)) {
         say.say(format!("note: {note}"));
     }
     let resume = read_resume(&args, &plan, &scene, &patches, &options)?;

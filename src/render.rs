@@ -171,6 +171,12 @@ pub struct RenderOptions {
     pub light_shafts: Option<bool>,
 }
 
+/// Lines a step across the median glossy patch below which an asked-for bundle resolution
+/// gets a note (`RenderOptions::coarse_bundle_note`): a quarter, half the automatic
+/// resolution's line width or coarser. At one line a step and above, the glossy history's
+/// eleven bundles smooth the spikes (`iteration::auto_bundle_resolution`).
+pub const COARSE_BUNDLE_LINES: f64 = 0.25;
+
 impl RenderOptions {
     pub fn from_scene(scene: &Scene) -> Self {
         RenderOptions {
@@ -244,6 +250,40 @@ impl RenderOptions {
         let resolution =
             self.bundle_resolution.unwrap_or_else(|| needs.resolution() / crate::iteration::pixel_stride(per_step));
         (resolution, per_step)
+    }
+
+    /// A note where a bundle resolution that was asked for (`--bundle-resolution`, or the
+    /// scene's `bundle_resolution`) crosses the median glossy patch with fewer than
+    /// `COARSE_BUNDLE_LINES` lines a step. Such a patch's J_j is then zero on most steps and
+    /// many times its mean on the others, and the image reflects the glossy part of the last
+    /// few steps' J_j (docs/ALGORITHM.md 6, "What the image takes from the senders"): the
+    /// image stays unbiased, but its error comes in spikes and can rise for hundreds of steps
+    /// before it falls (the Sierpinski scene at 128 x 128 with 128: 9 % after 64 steps, 31 %
+    /// after 256; 3.9 % after 256 at the automatic 704). `None` where the resolution is
+    /// automatic, or there are no glossy patches.
+    pub fn coarse_bundle_note(&self, scene: &Scene, patches: &Patches) -> Option<String> {
+        let asked = self.bundle_resolution?;
+        if self.iterations == 0 {
+            return None;
+        }
+        let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+        let needs = crate::iteration::BundleNeeds::of(patches, &scene.materials, radius, &self.views(scene));
+        if needs.patches <= 0.0 {
+            return None;
+        }
+        let per_step = self.bundles_per_step.unwrap_or_else(|| crate::iteration::auto_bundles_per_step(&needs));
+        let lines = f64::from(per_step) * (f64::from(asked) / needs.patches).powi(2);
+        (lines < COARSE_BUNDLE_LINES).then(|| {
+            let automatic = needs.resolution() / crate::iteration::pixel_stride(per_step);
+            format!(
+                "the bundle resolution {asked} (--bundle-resolution or the scene's bundle_resolution) crosses the \
+                 median glossy patch with {lines:.2} lines a step ({per_step} bundle{} a step; the automatic \
+                 resolution, {automatic}, gives it about one): its glossy reflections reach the image as rare \
+                 spikes, and the image's error can grow for hundreds of steps before it falls. Leave the \
+                 resolution automatic, or raise it toward that",
+                if per_step == 1 { "" } else { "s" }
+            )
+        })
     }
 
     /// The grid of a render's bundles at `resolution` (`bundles_for`) with `per_step` of them
@@ -422,7 +462,9 @@ pub struct RenderStats {
     pub image_ms: f64,
     pub total_ms: f64,
     /// The scene's notes (`Scene::notes`): what it holds that is not rendered, and glossy
-    /// lobes sharper than the method samples well; `note: ...` on stderr too.
+    /// lobes sharper than the method samples well; and an asked-for bundle resolution too
+    /// coarse for the glossy patches (`RenderOptions::coarse_bundle_note`). `note: ...` on
+    /// stderr too.
     pub notes: Vec<String>,
 }
 
@@ -892,6 +934,9 @@ pub struct Renderer<'a> {
     memory: crate::memory::MemoryPlan,
     upload_ms: f64,
     start: Instant,
+    /// The scene's notes and the bundle resolution's (`RenderOptions::coarse_bundle_note`),
+    /// for the stats.
+    notes: Vec<String>,
 }
 
 impl<'a> Renderer<'a> {
@@ -1044,6 +1089,7 @@ impl<'a> Renderer<'a> {
             memory,
             upload_ms,
             start,
+            notes: scene.notes.iter().cloned().chain(given.coarse_bundle_note(scene, patches)).collect(),
         })
     }
 
@@ -1487,7 +1533,7 @@ impl<'a> Renderer<'a> {
                 upload_ms: self.upload_ms,
                 image_ms,
                 total_ms: milliseconds(self.start),
-                notes: self.scene.notes.clone(),
+                notes: self.notes.clone(),
             },
         })
     }
@@ -1722,6 +1768,42 @@ const STEPS_PER_BATCH: u32 = 8;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_asked_for_bundle_resolution_too_coarse_for_the_glossy_patches_gets_a_note() {
+        let note = |name: &str, bundle_resolution: Option<u32>, bundles_per_step: Option<u32>| {
+            let scene = crate::scene::load::load(std::path::Path::new(&format!("scenes/{name}.toml"))).unwrap();
+            let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
+            let options = RenderOptions {
+                bundle_resolution,
+                bundles_per_step,
+                iterations: 8,
+                ..RenderOptions::from_scene(&scene)
+            };
+            options.coarse_bundle_note(&scene, &patches)
+        };
+        // The fractal's triangles (edge 2 / 64) in a room of radius 5.8 ask for about 640 for
+        // one line a step: 128 crosses the median one with (128 / 640)^2 = 0.04 lines a step of
+        // one bundle, 256 with 0.16, 352 with 0.3.
+        let coarse = note("sierpinski", Some(128), Some(1)).expect("128 is far too coarse for the fractal");
+        assert!(coarse.contains("bundle resolution 128") && coarse.contains("0.04 lines"), "{coarse}");
+        assert!(coarse.contains("1 bundle a step; the automatic resolution, 832"), "{coarse}");
+        assert!(note("sierpinski", Some(256), Some(1)).is_some());
+        assert_eq!(note("sierpinski", Some(352), Some(1)), None);
+        // Four bundles a step (the scene's 512 x 512 takes them when automatic) give four times
+        // the lines, at half the automatic resolution.
+        let four = note("sierpinski", Some(128), None).expect("0.16 lines a step");
+        assert!(
+            four.contains("0.16 lines") && four.contains("4 bundles a step; the automatic resolution, 416"),
+            "{four}"
+        );
+        assert_eq!(note("sierpinski", Some(256), None), None);
+        // Automatic: never. Diffuse scenes: never.
+        assert_eq!(note("sierpinski", None, None), None);
+        assert_eq!(note("cornell_box", Some(16), None), None);
+        // The glossy blocks of cornell_point are large: a coarse grid still crosses them.
+        assert_eq!(note("cornell_point", Some(64), None), None);
+    }
 
     #[test]
     fn direct_schedule_keeps_16_front_passes_only_where_a_light_samples_new_points() {
