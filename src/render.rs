@@ -252,17 +252,17 @@ impl RenderOptions {
         (resolution, per_step)
     }
 
-    /// A note where a bundle resolution that was asked for (`--bundle-resolution`, or the
-    /// scene's `bundle_resolution`) crosses the median glossy patch with fewer than
-    /// `COARSE_BUNDLE_LINES` lines a step. Such a patch's J_j is then zero on most steps and
-    /// many times its mean on the others, and the image reflects the glossy part of the last
-    /// few steps' J_j (docs/ALGORITHM.md 6, "What the image takes from the senders"): the
-    /// image stays unbiased, but its error comes in spikes and can rise for hundreds of steps
-    /// before it falls (the Sierpinski scene at 128 x 128 with 128: 9 % after 64 steps, 31 %
-    /// after 256; 3.9 % after 256 at the automatic 704). `None` where the resolution is
-    /// automatic, or there are no glossy patches.
+    /// A note where the bundles cross the median glossy patch with fewer than
+    /// `COARSE_BUNDLE_LINES` lines a step: a resolution that was asked for
+    /// (`--bundle-resolution`, or the scene's `bundle_resolution`), or the automatic one where
+    /// it stops at `iteration::AUTO_BUNDLE_MAX` (glossy meshes of very small triangles). Such a
+    /// patch's J_j is then zero on most steps and many times its mean on the others, and the
+    /// image reflects the glossy part of the last few steps' J_j (docs/ALGORITHM.md 6, "What
+    /// the image takes from the senders"): the image stays unbiased, but its error comes in
+    /// spikes and can rise for hundreds of steps before it falls (the Sierpinski scene at
+    /// 128 x 128 with 128: 9 % after 64 steps, 31 % after 256; 3.9 % after 256 at the
+    /// automatic 704). `None` without glossy patches or an iteration.
     pub fn coarse_bundle_note(&self, scene: &Scene, patches: &Patches) -> Option<String> {
-        let asked = self.bundle_resolution?;
         if self.iterations == 0 {
             return None;
         }
@@ -272,17 +272,29 @@ impl RenderOptions {
             return None;
         }
         let per_step = self.bundles_per_step.unwrap_or_else(|| crate::iteration::auto_bundles_per_step(&needs));
-        let lines = f64::from(per_step) * (f64::from(asked) / needs.patches).powi(2);
-        (lines < COARSE_BUNDLE_LINES).then(|| {
-            let automatic = needs.resolution() / crate::iteration::pixel_stride(per_step);
-            format!(
+        let automatic = needs.resolution() / crate::iteration::pixel_stride(per_step);
+        let resolution = self.bundle_resolution.unwrap_or(automatic);
+        let lines = f64::from(per_step) * (f64::from(resolution) / needs.patches).powi(2);
+        if lines >= COARSE_BUNDLE_LINES {
+            return None;
+        }
+        let bundles = format!("{per_step} bundle{} a step", if per_step == 1 { "" } else { "s" });
+        let spikes = "its glossy reflections reach the image as rare spikes, and the image's error can grow for \
+                      hundreds of steps before it falls";
+        Some(match self.bundle_resolution {
+            Some(asked) => format!(
                 "the bundle resolution {asked} (--bundle-resolution or the scene's bundle_resolution) crosses the \
-                 median glossy patch with {lines:.2} lines a step ({per_step} bundle{} a step; the automatic \
-                 resolution, {automatic}, gives it about one): its glossy reflections reach the image as rare \
-                 spikes, and the image's error can grow for hundreds of steps before it falls. Leave the \
-                 resolution automatic, or raise it toward that",
-                if per_step == 1 { "" } else { "s" }
-            )
+                 median glossy patch with {lines:.2} lines a step ({bundles}; the automatic resolution, \
+                 {automatic}, gives it about one): {spikes}. Leave the resolution automatic, or raise it toward that"
+            ),
+            None => format!(
+                "the median glossy patch is crossed by {lines:.2} lines a step ({bundles}) even at the automatic \
+                 bundle resolution, {automatic}, which stops at {} (one line a step would take about {:.0}): \
+                 {spikes}. A larger --bundle-resolution costs time as its square; glossy meshes of larger \
+                 triangles cost none",
+                crate::iteration::AUTO_BUNDLE_MAX,
+                needs.patches / f64::from(per_step).sqrt()
+            ),
         })
     }
 
@@ -462,7 +474,8 @@ pub struct RenderStats {
     pub image_ms: f64,
     pub total_ms: f64,
     /// The scene's notes (`Scene::notes`): what it holds that is not rendered, and glossy
-    /// lobes sharper than the method samples well; and an asked-for bundle resolution too
+    /// lobes sharper than the method samples well; the tessellation's (`Patches::notes`:
+    /// emitting triangles past the first shot's sample cap); and a bundle resolution too
     /// coarse for the glossy patches (`RenderOptions::coarse_bundle_note`). `note: ...` on
     /// stderr too.
     pub notes: Vec<String>,
@@ -934,8 +947,8 @@ pub struct Renderer<'a> {
     memory: crate::memory::MemoryPlan,
     upload_ms: f64,
     start: Instant,
-    /// The scene's notes and the bundle resolution's (`RenderOptions::coarse_bundle_note`),
-    /// for the stats.
+    /// The scene's notes, the tessellation's and the bundle resolution's
+    /// (`RenderOptions::coarse_bundle_note`), for the stats.
     notes: Vec<String>,
 }
 
@@ -1089,7 +1102,13 @@ impl<'a> Renderer<'a> {
             memory,
             upload_ms,
             start,
-            notes: scene.notes.iter().cloned().chain(given.coarse_bundle_note(scene, patches)).collect(),
+            notes: scene
+                .notes
+                .iter()
+                .chain(&patches.notes)
+                .cloned()
+                .chain(given.coarse_bundle_note(scene, patches))
+                .collect(),
         })
     }
 
@@ -1770,7 +1789,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn an_asked_for_bundle_resolution_too_coarse_for_the_glossy_patches_gets_a_note() {
+    fn a_bundle_resolution_too_coarse_for_the_glossy_patches_gets_a_note() {
         let note = |name: &str, bundle_resolution: Option<u32>, bundles_per_step: Option<u32>| {
             let scene = crate::scene::load::load(std::path::Path::new(&format!("scenes/{name}.toml"))).unwrap();
             let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
@@ -1798,8 +1817,24 @@ mod tests {
             "{four}"
         );
         assert_eq!(note("sierpinski", Some(256), None), None);
-        // Automatic: never. Diffuse scenes: never.
+        // Automatic: not where the automatic resolution gives one line a step.
         assert_eq!(note("sierpinski", None, None), None);
+        // But where it stops at its cap: a fractal of level 7 and size 1 (edge 1 / 128), seen
+        // from close by, whose median glossy patch (the tessellation cuts the triangles where
+        // the tetrahedra touch) would need 7 700, so 1 024 crosses it with 0.02 lines a step.
+        let text = std::fs::read_to_string("scenes/sierpinski.toml")
+            .unwrap()
+            .replace("level = 6", "level = 7")
+            .replace("size = 2.0", "size = 1.0")
+            .replace("position = [0.8, 1.45, 2.8]", "position = [0.4, 0.9, 1.4]");
+        let scene = crate::scene::load::load_str(&text, std::path::Path::new("level8.toml")).unwrap();
+        let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
+        let options = RenderOptions { iterations: 8, bundles_per_step: Some(1), ..RenderOptions::from_scene(&scene) };
+        let capped = options.coarse_bundle_note(&scene, &patches).expect("the cap binds");
+        assert!(capped.contains("0.02 lines") && capped.contains("automatic bundle resolution, 1024"), "{capped}");
+        // No iteration, no note.
+        assert_eq!(RenderOptions { iterations: 0, ..options }.coarse_bundle_note(&scene, &patches), None);
+        // Diffuse scenes: never.
         assert_eq!(note("cornell_box", Some(16), None), None);
         // The glossy blocks of cornell_point are large: a coarse grid still crosses them.
         assert_eq!(note("cornell_point", Some(64), None), None);

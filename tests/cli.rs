@@ -520,3 +520,40 @@ fn test11_the_cpu_adapters_get_four_worker_threads_a_core_unless_the_environment
     }
     assert!(images[0] == images[1], "the image depends on the CPU adapter's thread count");
 }
+
+#[test]
+fn test12_a_bundle_resolution_too_coarse_for_the_glossy_patches_is_noted() {
+    // The Sierpinski fractal's glossy triangles (edge 2 / 64) want about 700 lines across a
+    // bundle for one line a step; --bundle-resolution 128 crosses them with 0.04, and the
+    // image would reflect their spikes (render::RenderOptions::coarse_bundle_note). The run
+    // goes on, with the note on stderr and in the stats; the automatic resolution has none.
+    if common::gpu().is_none() {
+        return;
+    }
+    let scratch = Scratch::new("cli", "coarse-bundles");
+    let scene = common::scenes::shipped("sierpinski").display().to_string();
+    for coarse in [true, false] {
+        let dir = scratch.dir(if coarse { "coarse" } else { "automatic" });
+        let (exr, stats) = (dir.join("s.exr").display().to_string(), dir.join("s.json"));
+        let mut args = vec![scene.as_str(), "--iterations", "1", "--burn-in", "0", "--width", "16", "--height", "16"];
+        args.extend(["--hemicube-resolution", "64", "--out", &exr, "--stats", stats.to_str().unwrap()]);
+        if coarse {
+            args.extend(["--bundle-resolution", "128", "--bundles-per-step", "1"]);
+        }
+        let o = firstshot(&args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(0), "stderr:\n{err}");
+        let noted: Vec<&str> = err.lines().filter(|l| l.starts_with("note: ")).collect();
+        let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        let notes: Vec<&str> = json["notes"].as_array().expect("notes").iter().filter_map(|n| n.as_str()).collect();
+        if coarse {
+            assert_eq!(noted.len(), 1, "stderr:\n{err}");
+            for part in ["bundle resolution 128", "0.04 lines a step", "automatic resolution"] {
+                assert!(noted[0].contains(part), "{}", noted[0]);
+            }
+            assert_eq!(notes, [noted[0].trim_start_matches("note: ")]);
+        } else {
+            assert!(noted.is_empty() && notes.is_empty(), "stderr:\n{err}\nstats: {notes:?}");
+        }
+    }
+}
