@@ -260,7 +260,7 @@ impl RenderOptions {
     /// image reflects the glossy part of the last few steps' J_j (docs/ALGORITHM.md 6, "What
     /// the image takes from the senders"): the image stays unbiased, but its error comes in
     /// spikes and can rise for hundreds of steps before it falls (the Sierpinski scene at
-    /// 128 x 128 with 128: 9 % after 64 steps, 31 % after 256; 3.9 % after 256 at the
+    /// 128 x 128 with 128: 9 % after 64 steps, 26 % after 256; 2.5 % after 256 at the
     /// automatic 704). `None` without glossy patches or an iteration.
     pub fn coarse_bundle_note(&self, scene: &Scene, patches: &Patches) -> Option<String> {
         if self.iterations == 0 {
