@@ -1819,9 +1819,9 @@ mod tests {
         assert_eq!(note("sierpinski", Some(256), None), None);
         // Automatic: not where the automatic resolution gives one line a step.
         assert_eq!(note("sierpinski", None, None), None);
-        // But where it stops at its cap: a fractal of level 7 and size 1 (edge 1 / 128), seen
-        // from close by, whose median glossy patch (the tessellation cuts the triangles where
-        // the tetrahedra touch) would need 7 700, so 1 024 crosses it with 0.02 lines a step.
+        // But where it stops at its cap: a fractal of level 7 and size 1 (edge 1 / 128, area
+        // 2.6e-5), seen from close by, would need 2 r sqrt(2 / A) = 2 580, so 1 024 crosses
+        // its median triangle with (1024 / 2580)^2 = 0.16 lines a step.
         let text = std::fs::read_to_string("scenes/sierpinski.toml")
             .unwrap()
             .replace("level = 6", "level = 7")
@@ -1831,7 +1831,7 @@ mod tests {
         let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
         let options = RenderOptions { iterations: 8, bundles_per_step: Some(1), ..RenderOptions::from_scene(&scene) };
         let capped = options.coarse_bundle_note(&scene, &patches).expect("the cap binds");
-        assert!(capped.contains("0.02 lines") && capped.contains("automatic bundle resolution, 1024"), "{capped}");
+        assert!(capped.contains("0.16 lines") && capped.contains("about 2581"), "{capped}");
         // No iteration, no note.
         assert_eq!(RenderOptions { iterations: 0, ..options }.coarse_bundle_note(&scene, &patches), None);
         // Diffuse scenes: never.
