@@ -466,17 +466,18 @@ fn render_options(args: &RenderArgs, scene: &scene::Scene) -> Result<RenderOptio
     if let Some(v) = args.light_window {
         options.light_window = v;
     }
-    for (flag, v) in [
-        ("--width", args.width),
-        ("--height", args.height),
-        ("--hemicube-resolution", args.hemicube_resolution.and_then(|r| r.0)),
-        ("--bundle-resolution", args.bundle_resolution.and_then(|r| r.0)),
-        ("--shadow-resolution", args.shadow_resolution),
+    for (flag, v, least) in [
+        ("--width", args.width, 1),
+        ("--height", args.height, 1),
+        ("--hemicube-resolution", args.hemicube_resolution.and_then(|r| r.0), 1),
+        // A projection keeps a pixel of margin on each side of the scene's bounding sphere.
+        ("--bundle-resolution", args.bundle_resolution.and_then(|r| r.0), firstshot::iteration::MIN_BUNDLE_RESOLUTION),
+        ("--shadow-resolution", args.shadow_resolution, 1),
     ] {
         if let Some(v) = v
-            && !(1..=16384).contains(&v)
+            && !(least..=16384).contains(&v)
         {
-            return Err(usage(format!("{flag} {v}: expected 1 to 16384 pixels")));
+            return Err(usage(format!("{flag} {v}: expected {least} to 16384 pixels")));
         }
     }
     options.width = args.width.unwrap_or(options.width);

@@ -722,7 +722,14 @@ pub fn check_limits(limits: &wgpu::Limits, patches: &Patches, options: &RenderOp
                 crate::iteration::MIN_BUNDLE_RESOLUTION
             )));
         }
-        fit("the ray-bundle line table", crate::iteration::line_table_bytes(r), "use a smaller --bundle-resolution")?;
+        // The largest resolution whose line table fits, for the hint (the table grows as r^2).
+        let per_line = crate::iteration::line_table_bytes(1);
+        let largest = ((binding.min(buffer) / per_line) as f64).sqrt() as u64;
+        fit(
+            "the ray-bundle line table",
+            crate::iteration::line_table_bytes(r),
+            &format!("use --bundle-resolution {largest} or less"),
+        )?;
     }
     Ok(())
 }

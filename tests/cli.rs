@@ -114,7 +114,7 @@ fn test02_usage_errors_exit_2_and_write_nothing() {
         (vec!["--direct-passes", "0"], "--direct-passes 0"),
         (vec!["--window-steps", "0"], "--window-steps 0"),
         (vec!["--burn-in", "-1"], "--burn-in"),
-        (vec!["--bundle-resolution", "0"], "--bundle-resolution 0: expected 1 to 16384"),
+        (vec!["--bundle-resolution", "0"], "--bundle-resolution 0: expected 4 to 16384"),
         (vec!["--bundle-resolution", "-5"], "expected a number of pixels or \"auto\", got \"-5\""),
         (vec!["--bundle-resolution", "fine"], "expected a number of pixels or \"auto\""),
         (vec!["--hemicube-resolution", "0"], "--hemicube-resolution 0: expected 1 to 16384"),
@@ -352,7 +352,15 @@ fn test07_bundle_resolution_beyond_the_buffers_is_a_limits_error() {
     let path = scene.display().to_string();
     let args = [path.as_str(), "--iterations", "1", "--bundle-resolution", "16384", "--quiet"];
     let err = refused_render(&scratch, &args, "x.exr");
-    assert!(err.contains("--bundle-resolution"), "{err}");
+    // The hint names the largest resolution whose table fits what the device allows: the
+    // table is line_table_bytes(r), the same bytes for every line.
+    let number_after = |key: &str| -> u64 {
+        let rest = &err[err.find(key).unwrap_or_else(|| panic!("{key:?} in {err}")) + key.len()..];
+        rest.split(|c: char| !c.is_ascii_digit()).next().unwrap().parse().unwrap()
+    };
+    let (allowed, largest) = (number_after("the device allows "), number_after("use --bundle-resolution "));
+    let table = |r: u64| firstshot::iteration::line_table_bytes(r as u32);
+    assert!(table(largest) <= allowed && table(largest + 1) > allowed, "{err}");
 }
 
 /// `--hemicube-resolution auto` overrides a scene's fixed resolution with the automatic
