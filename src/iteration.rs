@@ -382,6 +382,10 @@ pub fn is_glossy(p: &crate::scene::Patch, materials: &[crate::scene::Material]) 
 pub struct BundleNeeds {
     pub patches: f64,
     pub image: f64,
+    /// The patches' rule for the glossy patches whatever their share of the views: `patches`
+    /// where they fill at least `GLOSSY_SHARE` of them, else what the rule would ask (0
+    /// without glossy patches; `RenderOptions::coarse_bundle_note`).
+    pub glossy: f64,
     /// What the patches' rule would give the reflecting patches that are not glossy: the
     /// resolution that crosses their median one with one line a step (`auto_wide_lines`).
     pub diffuse: f64,
@@ -499,7 +503,14 @@ impl BundleNeeds {
             glossy_areas.len() as f64 / sampled.clone().count().max(1) as f64
         };
         let by_patches = if share >= GLOSSY_SHARE { glossy_need } else { 0.0 };
-        BundleNeeds { patches: by_patches, image: wanted, diffuse, patch_count: patches.patches.len(), view_pixels }
+        BundleNeeds {
+            patches: by_patches,
+            image: wanted,
+            glossy: glossy_need,
+            diffuse,
+            patch_count: patches.patches.len(),
+            view_pixels,
+        }
     }
 }
 
@@ -871,6 +882,7 @@ mod tests {
         let needs = |patches: f64, image: f64| BundleNeeds {
             patches,
             image,
+            glossy: patches,
             diffuse: 80.0,
             patch_count: 22_420,
             view_pixels: 256 * 256,
@@ -896,6 +908,7 @@ mod tests {
         let needs = |patches: f64, image: f64, patch_count: usize| BundleNeeds {
             patches,
             image,
+            glossy: patches,
             diffuse: 0.0,
             patch_count,
             view_pixels: 256 * 256,

@@ -253,9 +253,11 @@ impl RenderOptions {
     }
 
     /// A note where the bundles cross the median glossy patch with fewer than
-    /// `COARSE_BUNDLE_LINES` lines a step: a resolution that was asked for
-    /// (`--bundle-resolution`, or the scene's `bundle_resolution`), or the automatic one where
-    /// it stops at `iteration::AUTO_BUNDLE_MAX` (glossy meshes of very small triangles). Such a
+    /// `COARSE_BUNDLE_LINES` lines a step: at a resolution that was asked for
+    /// (`--bundle-resolution`, or the scene's `bundle_resolution`); at the automatic one where
+    /// it stops at `iteration::AUTO_BUNDLE_MAX` (glossy meshes of very small triangles); or
+    /// where the glossy patches fill under `iteration::GLOSSY_SHARE` of the views, so that
+    /// the image alone sets the resolution (a small glossy object of fine triangles). Such a
     /// patch's J_j is then zero on most steps and many times its mean on the others, and the
     /// image reflects the glossy part of the last few steps' J_j (docs/ALGORITHM.md 6, "What
     /// the image takes from the senders"): the image stays unbiased, but its error comes in
@@ -268,32 +270,39 @@ impl RenderOptions {
         }
         let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
         let needs = crate::iteration::BundleNeeds::of(patches, &scene.materials, radius, &self.views(scene));
-        if needs.patches <= 0.0 {
+        if needs.glossy <= 0.0 {
             return None;
         }
         let per_step = self.bundles_per_step.unwrap_or_else(|| crate::iteration::auto_bundles_per_step(&needs));
         let automatic = needs.resolution() / crate::iteration::pixel_stride(per_step);
         let resolution = self.bundle_resolution.unwrap_or(automatic);
-        let lines = f64::from(per_step) * (f64::from(resolution) / needs.patches).powi(2);
+        let lines = f64::from(per_step) * (f64::from(resolution) / needs.glossy).powi(2);
         if lines >= COARSE_BUNDLE_LINES {
             return None;
         }
         let bundles = format!("{per_step} bundle{} a step", if per_step == 1 { "" } else { "s" });
+        let one_line = needs.glossy / f64::from(per_step).sqrt();
         let spikes = "its glossy reflections reach the image as rare spikes, and the image's error can grow for \
                       hundreds of steps before it falls";
-        Some(match self.bundle_resolution {
-            Some(asked) => format!(
+        Some(match (self.bundle_resolution, needs.patches > 0.0) {
+            (Some(asked), true) => format!(
                 "the bundle resolution {asked} (--bundle-resolution or the scene's bundle_resolution) crosses the \
                  median glossy patch with {lines:.2} lines a step ({bundles}; the automatic resolution, \
                  {automatic}, gives it about one): {spikes}. Leave the resolution automatic, or raise it toward that"
             ),
-            None => format!(
+            (None, true) => format!(
                 "the median glossy patch is crossed by {lines:.2} lines a step ({bundles}) even at the automatic \
-                 bundle resolution, {automatic}, which stops at {} (one line a step would take about {:.0}): \
-                 {spikes}. A larger --bundle-resolution costs time as its square; glossy meshes of larger \
-                 triangles cost none",
+                 bundle resolution, {automatic}, which stops at {} (one line a step would take about \
+                 {one_line:.0}): {spikes}. A larger --bundle-resolution costs time as its square; glossy meshes \
+                 of larger triangles cost none",
                 crate::iteration::AUTO_BUNDLE_MAX,
-                needs.patches / f64::from(per_step).sqrt()
+            ),
+            (_, false) => format!(
+                "the glossy patches fill under {:.0} % of the view, so the bundle resolution, {resolution}, follows \
+                 the image and crosses their median patch with {lines:.2} lines a step ({bundles}; about \
+                 {one_line:.0} would give one): their glossy reflections reach the image as rare bright pixels. A \
+                 larger --bundle-resolution costs time as its square; glossy meshes of larger triangles cost none",
+                100.0 * crate::iteration::GLOSSY_SHARE,
             ),
         })
     }
@@ -1816,6 +1825,18 @@ mod tests {
         assert!(coarse.contains("1 bundle a step; the automatic resolution, 832"), "{coarse}");
         assert!(note("sierpinski", Some(256), Some(1)).is_some());
         assert_eq!(note("sierpinski", Some(352), Some(1)), None);
+        // A small glossy fractal (size 0.5: under a tenth of the view) leaves the resolution to
+        // the image: 192 at 128 x 128, against about 2 600 for one line a step.
+        let text = std::fs::read_to_string("scenes/sierpinski.toml")
+            .unwrap()
+            .replace("size = 2.0", "size = 0.5")
+            .replace("width = 512", "width = 128")
+            .replace("height = 512", "height = 128");
+        let scene = crate::scene::load::load_str(&text, std::path::Path::new("small.toml")).unwrap();
+        let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
+        let small = RenderOptions { iterations: 8, ..RenderOptions::from_scene(&scene) };
+        let noted = small.coarse_bundle_note(&scene, &patches).expect("the image's resolution is far too coarse");
+        assert!(noted.contains("under 10 % of the view") && noted.contains("resolution, 192"), "{noted}");
         // Four bundles a step (the scene's 512 x 512 takes them when automatic) give four times
         // the lines, at half the automatic resolution.
         let four = note("sierpinski", Some(128), None).expect("0.16 lines a step");
