@@ -171,9 +171,9 @@ pub struct RenderOptions {
     pub light_shafts: Option<bool>,
 }
 
-/// Lines a step across the median glossy patch below which an asked-for bundle resolution
-/// gets a note (`RenderOptions::coarse_bundle_note`): a quarter, half the automatic
-/// resolution's line width or coarser. At one line a step and above, the glossy history's
+/// Lines a step across the median glossy patch below which a bundle resolution gets a note
+/// (`RenderOptions::coarse_bundle_note`): a quarter, lines twice as wide as one line a step
+/// asks or wider. At one line a step and above, the glossy history's
 /// eleven bundles smooth the spikes (`iteration::auto_bundle_resolution`).
 pub const COARSE_BUNDLE_LINES: f64 = 0.25;
 
@@ -297,7 +297,13 @@ impl RenderOptions {
                  of larger triangles cost none",
                 crate::iteration::AUTO_BUNDLE_MAX,
             ),
-            (_, false) => format!(
+            (Some(asked), false) => format!(
+                "the bundle resolution {asked} (--bundle-resolution or the scene's bundle_resolution) crosses the \
+                 median glossy patch with {lines:.2} lines a step ({bundles}; about {one_line:.0} would give \
+                 one): {spikes}. A larger --bundle-resolution costs time as its square; glossy meshes of larger \
+                 triangles cost none"
+            ),
+            (None, false) => format!(
                 "the glossy patches fill under {:.0} % of the view, so the bundle resolution, {resolution}, follows \
                  the image and crosses their median patch with {lines:.2} lines a step ({bundles}; about \
                  {one_line:.0} would give one): their glossy reflections reach the image as rare bright pixels. A \
@@ -1837,6 +1843,10 @@ mod tests {
         let small = RenderOptions { iterations: 8, ..RenderOptions::from_scene(&scene) };
         let noted = small.coarse_bundle_note(&scene, &patches).expect("the image's resolution is far too coarse");
         assert!(noted.contains("under 10 % of the view") && noted.contains("resolution, 192"), "{noted}");
+        // Asked for there, the note names the asked resolution and what one line would take.
+        let asked = RenderOptions { bundle_resolution: Some(256), ..small };
+        let noted = asked.coarse_bundle_note(&scene, &patches).expect("256 is far too coarse too");
+        assert!(noted.contains("bundle resolution 256 (") && noted.contains("about 2581 would give one"), "{noted}");
         // Four bundles a step (the scene's 512 x 512 takes them when automatic) give four times
         // the lines, at half the automatic resolution.
         let four = note("sierpinski", Some(128), None).expect("0.16 lines a step");
@@ -1855,7 +1865,7 @@ mod tests {
             .replace("level = 6", "level = 7")
             .replace("size = 2.0", "size = 1.0")
             .replace("position = [0.8, 1.45, 2.8]", "position = [0.4, 0.9, 1.4]");
-        let scene = crate::scene::load::load_str(&text, std::path::Path::new("level8.toml")).unwrap();
+        let scene = crate::scene::load::load_str(&text, std::path::Path::new("level7.toml")).unwrap();
         let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
         let options = RenderOptions { iterations: 8, bundles_per_step: Some(1), ..RenderOptions::from_scene(&scene) };
         let capped = options.coarse_bundle_note(&scene, &patches).expect("the cap binds");
