@@ -1833,13 +1833,17 @@ mod tests {
         assert_eq!(note("sierpinski", Some(352), Some(1)), None);
         // A small glossy fractal (size 0.5: under a tenth of the view) leaves the resolution to
         // the image: 192 at 128 x 128, against about 2 600 for one line a step.
-        let text = std::fs::read_to_string("scenes/sierpinski.toml")
-            .unwrap()
-            .replace("size = 2.0", "size = 0.5")
-            .replace("width = 512", "width = 128")
-            .replace("height = 512", "height = 128");
-        let scene = crate::scene::load::load_str(&text, std::path::Path::new("small.toml")).unwrap();
-        let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
+        // The Sierpinski scene with `edits` made to its file, and its patches.
+        let edited = |edits: &[(&str, &str)]| {
+            let text = edits
+                .iter()
+                .fold(std::fs::read_to_string("scenes/sierpinski.toml").unwrap(), |t, (from, to)| t.replace(from, to));
+            let scene = crate::scene::load::load_str(&text, std::path::Path::new("edited.toml")).unwrap();
+            let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
+            (scene, patches)
+        };
+        let (scene, patches) =
+            edited(&[("size = 2.0", "size = 0.5"), ("width = 512", "width = 128"), ("height = 512", "height = 128")]);
         let small = RenderOptions { iterations: 8, ..RenderOptions::from_scene(&scene) };
         let noted = small.coarse_bundle_note(&scene, &patches).expect("the image's resolution is far too coarse");
         assert!(noted.contains("under 10 % of the view") && noted.contains("resolution, 192"), "{noted}");
@@ -1860,13 +1864,11 @@ mod tests {
         // But where it stops at its cap: a fractal of level 7 and size 1 (edge 1 / 128, area
         // 2.6e-5), seen from close by, would need 2 r sqrt(2 / A) = 2 580, so 1 024 crosses
         // its median triangle with (1024 / 2580)^2 = 0.16 lines a step.
-        let text = std::fs::read_to_string("scenes/sierpinski.toml")
-            .unwrap()
-            .replace("level = 6", "level = 7")
-            .replace("size = 2.0", "size = 1.0")
-            .replace("position = [0.8, 1.45, 2.8]", "position = [0.4, 0.9, 1.4]");
-        let scene = crate::scene::load::load_str(&text, std::path::Path::new("level7.toml")).unwrap();
-        let patches = crate::scene::tessellate::tessellate(&scene, scene.settings.patch_size).unwrap();
+        let (scene, patches) = edited(&[
+            ("level = 6", "level = 7"),
+            ("size = 2.0", "size = 1.0"),
+            ("position = [0.8, 1.45, 2.8]", "position = [0.4, 0.9, 1.4]"),
+        ]);
         let options = RenderOptions { iterations: 8, bundles_per_step: Some(1), ..RenderOptions::from_scene(&scene) };
         let capped = options.coarse_bundle_note(&scene, &patches).expect("the cap binds");
         assert!(capped.contains("0.16 lines") && capped.contains("about 2581"), "{capped}");
