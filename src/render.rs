@@ -17,6 +17,7 @@ use crate::stages::camera_item_buffer::{CameraItemBuffer, gpu_camera};
 use crate::stages::image_estimate::{ImageEstimate, ImagePipelines};
 use crate::{Error, Result};
 use serde::Serialize;
+use std::borrow::Borrow;
 use std::time::Instant;
 
 /// Passes of an image without iteration (`--direct-passes`): each a camera sample per
@@ -241,12 +242,25 @@ impl RenderOptions {
     /// (`bundle_resolution_for`, `bundles_per_step_for`), from one pass over the patches
     /// (their bounding sphere and needs) where either is automatic.
     pub fn bundles_for(&self, scene: &Scene, patches: &Patches) -> (u32, u32) {
+        self.bundles_with(|| self.bundle_needs(scene, patches))
+    }
+
+    /// What the bundles of a render of `patches` need (`iteration::BundleNeeds`): a pass over
+    /// the patches, their bounding sphere and the views.
+    pub fn bundle_needs(&self, scene: &Scene, patches: &Patches) -> crate::iteration::BundleNeeds {
+        let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+        crate::iteration::BundleNeeds::of(patches, &scene.materials, radius, &self.views(scene))
+    }
+
+    /// `bundles_for`, with the needs from `needs`, asked for only where either is automatic
+    /// (`Renderer::new` shares one pass over the patches with `coarse_bundle_note_with`).
+    pub fn bundles_with<N: Borrow<crate::iteration::BundleNeeds>>(&self, needs: impl FnOnce() -> N) -> (u32, u32) {
         if let (Some(resolution), Some(per_step)) = (self.bundle_resolution, self.bundles_per_step) {
             return (resolution, per_step);
         }
-        let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
-        let needs = crate::iteration::BundleNeeds::of(patches, &scene.materials, radius, &self.views(scene));
-        let per_step = self.bundles_per_step.unwrap_or_else(|| crate::iteration::auto_bundles_per_step(&needs));
+        let needs = needs();
+        let needs = needs.borrow();
+        let per_step = self.bundles_per_step.unwrap_or_else(|| crate::iteration::auto_bundles_per_step(needs));
         let resolution =
             self.bundle_resolution.unwrap_or_else(|| needs.resolution() / crate::iteration::pixel_stride(per_step));
         (resolution, per_step)
@@ -265,17 +279,25 @@ impl RenderOptions {
     /// 128 x 128 with 128: 9 % after 64 steps, 26 % after 256; 2.5 % after 256 at the
     /// automatic 704). `None` without glossy patches or an iteration.
     pub fn coarse_bundle_note(&self, scene: &Scene, patches: &Patches) -> Option<String> {
+        self.coarse_bundle_note_with(|| self.bundle_needs(scene, patches))
+    }
+
+    /// `coarse_bundle_note`, with the needs from `needs`, asked for only where the render
+    /// iterates.
+    pub fn coarse_bundle_note_with<N: Borrow<crate::iteration::BundleNeeds>>(
+        &self,
+        needs: impl FnOnce() -> N,
+    ) -> Option<String> {
         if self.iterations == 0 {
             return None;
         }
-        let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
-        let needs = crate::iteration::BundleNeeds::of(patches, &scene.materials, radius, &self.views(scene));
+        let needs = needs();
+        let needs = needs.borrow();
         if needs.glossy <= 0.0 {
             return None;
         }
-        let per_step = self.bundles_per_step.unwrap_or_else(|| crate::iteration::auto_bundles_per_step(&needs));
+        let (resolution, per_step) = self.bundles_with(|| needs);
         let automatic = needs.resolution() / crate::iteration::pixel_stride(per_step);
-        let resolution = self.bundle_resolution.unwrap_or(automatic);
         let lines = f64::from(per_step) * (f64::from(resolution) / needs.glossy).powi(2);
         if lines >= COARSE_BUNDLE_LINES {
             return None;
@@ -989,7 +1011,11 @@ impl<'a> Renderer<'a> {
         // memory plan see the numbers. The Renderer keeps the options as given, whose fingerprint a
         // checkpoint or shard carries (the choice follows from them and the scene).
         let given = options;
-        let (bundle_resolution, per_step) = options.bundles_for(scene, patches);
+        // One pass over the patches (`RenderOptions::bundle_needs`) for the automatic bundles
+        // and the note on them, where either asks for it.
+        let needs = std::cell::OnceCell::new();
+        let needs = || needs.get_or_init(|| options.bundle_needs(scene, patches));
+        let (bundle_resolution, per_step) = options.bundles_with(needs);
         let hemicube_resolution = options.hemicube_resolution_for(patches);
         let resolved = RenderOptions {
             hemicube_resolution: Some(hemicube_resolution),
@@ -1129,7 +1155,7 @@ impl<'a> Renderer<'a> {
                 .iter()
                 .chain(&patches.notes)
                 .cloned()
-                .chain(given.coarse_bundle_note(scene, patches))
+                .chain(given.coarse_bundle_note_with(needs))
                 .collect(),
         })
     }
