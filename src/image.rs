@@ -140,6 +140,9 @@ impl Image {
             let mut encoder = png::Encoder::new(&mut bytes, self.width, self.height);
             encoder.set_color(png::ColorType::Rgb);
             encoder.set_depth(png::BitDepth::Eight);
+            // The fast deflate: the PNG is the preview beside the EXR, and every render writes
+            // it (256 x 256 Sierpinski: 14 -> 4 ms for the EXR and PNG, the PNG 12 % larger).
+            encoder.set_compression(png::Compression::Fast);
             let err =
                 |e: png::EncodingError| crate::Error::Image { path: PathBuf::from("<png>"), message: e.to_string() };
             let mut writer = encoder.write_header().map_err(err)?;
