@@ -180,10 +180,14 @@ fn touched_edges(corners: &[DVec2; 3], a: DVec2, b: DVec2, tolerance: f64) -> [b
 /// `PARALLEL_GAP_OF_EDGE` of the smaller one's longest edge). In a dense mesh most pairs
 /// within the gap are neither: the engine room's 110 340 triangles made 5.0 million pairs.
 fn could_meet(a: &Entry, b: &Entry, tolerance: f64, gap: f64) -> bool {
-    let within = |d: f64| (a.lo - d).cmple(b.hi).all() && (b.lo - d).cmple(a.hi).all();
-    within(tolerance)
+    boxes_within(a, b, tolerance)
         || (a.normal.dot(b.normal).abs() >= PARALLEL_COS
-            && within(gap.min(PARALLEL_GAP_OF_EDGE * a.longest.min(b.longest))))
+            && boxes_within(a, b, gap.min(PARALLEL_GAP_OF_EDGE * a.longest.min(b.longest))))
+}
+
+/// Whether the boxes of a and b overlap when each grows by `d`.
+fn boxes_within(a: &Entry, b: &Entry, d: f64) -> bool {
+    (a.lo - d).cmple(b.hi).all() && (b.lo - d).cmple(a.hi).all()
 }
 
 /// Every pair i < j of entries whose boxes overlap (within the tolerance) and that `keep`
@@ -194,7 +198,7 @@ fn could_meet(a: &Entry, b: &Entry, tolerance: f64, gap: f64) -> bool {
 /// cores.
 fn close_pairs(entries: &[Entry], tolerance: f64, keep: impl Fn(&Entry, &Entry) -> bool + Sync) -> Vec<(usize, usize)> {
     use rayon::prelude::*;
-    let overlap = |a: &Entry, b: &Entry| (a.lo - tolerance).cmple(b.hi).all() && (b.lo - tolerance).cmple(a.hi).all();
+    let overlap = |a: &Entry, b: &Entry| boxes_within(a, b, tolerance);
     let mut sizes: Vec<f64> = entries.iter().map(|e| (e.hi - e.lo).max_element()).collect();
     let middle = sizes.len() / 2;
     let median = *sizes.select_nth_unstable_by(middle, f64::total_cmp).1;
@@ -340,10 +344,9 @@ fn cut_lines(
         }
     };
     let height = other.map(|p| (p - frame.origin).dot(frame.normal));
-    let other_normal = (other[1] - other[0]).cross(other[2] - other[0]).normalize();
-    let edge = longest_edge(t).min(longest_edge(other));
+    let edge = longest_edge(t).min(other_entry.longest);
     let lying = height.iter().all(|h| h.abs() <= gap && h.abs() <= PARALLEL_GAP_OF_EDGE * edge);
-    if frame.normal.dot(other_normal).abs() >= PARALLEL_COS && lying {
+    if frame.normal.dot(other_entry.normal).abs() >= PARALLEL_COS && lying {
         // Lying on t. Neighbours in one plane meet t only along its edges, which cut nothing.
         let corners = other.map(|p| frame.to_2d(p));
         for i in (0..3).filter(|&i| !other_entry.inner_edge[i]) {
