@@ -306,6 +306,8 @@ impl RenderOptions {
         let one_line = needs.glossy / f64::from(per_step).sqrt();
         let spikes = "its glossy reflections reach the image as rare spikes, and the image's error can grow for \
                       hundreds of steps before it falls";
+        let costs =
+            "A larger --bundle-resolution costs time as its square; glossy meshes of larger triangles cost none";
         Some(match (self.bundle_resolution, needs.patches > 0.0) {
             (Some(asked), true) => format!(
                 "the bundle resolution {asked} (--bundle-resolution or the scene's bundle_resolution) crosses the \
@@ -315,21 +317,19 @@ impl RenderOptions {
             (None, true) => format!(
                 "the median glossy patch is crossed by {lines:.2} lines a step ({bundles}) even at the automatic \
                  bundle resolution, {automatic}, which stops at {} (one line a step would take about \
-                 {one_line:.0}): {spikes}. A larger --bundle-resolution costs time as its square; glossy meshes \
-                 of larger triangles cost none",
+                 {one_line:.0}): {spikes}. {costs}",
                 crate::iteration::AUTO_BUNDLE_MAX,
             ),
             (Some(asked), false) => format!(
                 "the bundle resolution {asked} (--bundle-resolution or the scene's bundle_resolution) crosses the \
                  median glossy patch with {lines:.2} lines a step ({bundles}; about {one_line:.0} would give \
-                 one): {spikes}. A larger --bundle-resolution costs time as its square; glossy meshes of larger \
-                 triangles cost none"
+                 one): {spikes}. {costs}"
             ),
             (None, false) => format!(
                 "the glossy patches fill under {:.0} % of the view, so the bundle resolution, {resolution}, follows \
                  the image and crosses their median patch with {lines:.2} lines a step ({bundles}; about \
-                 {one_line:.0} would give one): their glossy reflections reach the image as rare bright pixels. A \
-                 larger --bundle-resolution costs time as its square; glossy meshes of larger triangles cost none",
+                 {one_line:.0} would give one): their glossy reflections reach the image as rare bright pixels. \
+                 {costs}",
                 100.0 * crate::iteration::GLOSSY_SHARE,
             ),
         })
