@@ -1065,10 +1065,15 @@ fn test20_a_supersampled_camera_item_buffer_sees_what_a_raster_per_step_sees() {
     // the same scene points to grids of different texels). The Sierpinski scene (at 48 x 48
     // its fractal puts several edges in most pixels of its middle) over 24 steps (one block
     // and a half, so that a raster serves steps of two blocks), and the Cornell box with four
-    // cameras. Measured on lavapipe: 59 of 2 304 pixels differ on Sierpinski (relative RMS
-    // difference 4.8e-3), 11-17 on the Cornell box's views (6e-5 to 1.3e-3). A wrong stratum
-    // (x and y swapped, checked by breaking it) moves the sample by up to three quarters of a
-    // pixel, across patch edges too: 1 905-2 188 pixels then differ (2.7e-2 to 8.1e-2).
+    // cameras. How many samples an edge passes that close to depends on the rasteriser's
+    // sub-pixel precision, which Vulkan leaves to the driver (at least 4 bits): on lavapipe 59
+    // of 2 304 pixels differ on Sierpinski (relative RMS difference 4.8e-3) and 9-16 on the
+    // Cornell box's views (1.0e-4 to 1.5e-3); on an NVIDIA H200 (driver 580.159.04) 110
+    // (5.0e-3) and 92-150 (2.3e-4 to 2.4e-3), a share of 6.5 % at most, each render the same
+    // to the bit when repeated. A wrong stratum (x and y swapped, checked by breaking it)
+    // moves the sample by up to three quarters of a pixel, across patch edges too: 1 905-2 188
+    // pixels (83-95 %) then differ, by 2.7e-2 to 8.1e-2. The bounds (a quarter of the pixels,
+    // RMS 1e-2) sit between the two on both drivers.
     let Some(ctx) = common::gpu() else { return };
     let scenes = [
         (common::scenes::shipped("sierpinski"), false),
@@ -1122,7 +1127,7 @@ fn test20_a_supersampled_camera_item_buffer_sees_what_a_raster_per_step_sees() {
             let rms = (d2 / b2).sqrt();
             assert!(a.mean()[0] > 0.01, "the image is lit");
             assert!(
-                share < 0.05 && rms < 1e-2,
+                share < 0.25 && rms < 1e-2,
                 "{}: view {v}: {differ} pixels differ ({share:.4}), rms {rms:.2e}",
                 path.display()
             );

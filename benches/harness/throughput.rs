@@ -40,6 +40,12 @@ pub struct Measured {
     pub image: [u32; 2],
     pub hemicube_resolution: u32,
     pub bundle_resolution: u32,
+    /// Bundles a step draws, each at `bundle_resolution` (four where the image sets the
+    /// resolution: `iteration::auto_bundles_per_step`), so steps of runs that drew a
+    /// different number are not the same work.
+    pub bundles_per_step: u32,
+    /// Fine lines along a wide line's edge outside the glossy patches' window (1: one level).
+    pub wide_lines: u32,
     pub steps_per_run: u32,
     pub repeats: usize,
     /// `render`'s first-shot time, over the repeats.
@@ -180,6 +186,8 @@ fn measure(config: &Config, slot: &Slot, s: &LoadedScene) -> Result<Measured, St
         image: first.image,
         hemicube_resolution: first.hemicube_resolution,
         bundle_resolution: first.bundle_resolution,
+        bundles_per_step: first.bundles_per_step,
+        wide_lines: first.wide_lines,
         steps_per_run: steps,
         repeats: config.repeats,
         first_shot_ms,
@@ -269,7 +277,7 @@ fn print_summary(cases: &[Case]) {
         match &c.measured {
             Some(m) => row.extend([
                 m.patches.to_string(),
-                format!("{}/{}", m.bundle_resolution, m.hemicube_resolution),
+                format!("{}x{}/{}", m.bundles_per_step, m.bundle_resolution, m.hemicube_resolution),
                 if m.first_shot { spread(&m.first_shot_ms, 0) } else { "-".into() },
                 spread(&m.step_ms, 1),
                 format!("{:.1}", m.steps_per_second),
@@ -286,7 +294,7 @@ fn print_summary(cases: &[Case]) {
             "scene",
             "adapter",
             "patches",
-            "bundle/hemi",
+            "bundles/hemi",
             "first shot ms",
             "step ms",
             "steps/s",
