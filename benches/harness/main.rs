@@ -85,6 +85,11 @@ struct Args {
     /// Override the scenes' bundle resolution (throughput and convergence).
     #[arg(long, value_name = "R")]
     bundle_resolution: Option<u32>,
+    /// Bundles a step draws, as `firstshot --bundles-per-step` (1 or 4; default: the
+    /// automatic choice, four at Sierpinski's own 512 x 512), so that a step's time can be
+    /// held against a run that drew another number (throughput, scaling, convergence).
+    #[arg(long, value_name = "N", value_parser = parse_bundles_per_step)]
+    bundles_per_step: Option<u32>,
     /// Wide lines outside the glossy patches' window, as `firstshot --wide-lines` (1: one
     /// level; default: the automatic choice).
     #[arg(long, value_name = "N")]
@@ -170,6 +175,7 @@ pub struct Config {
     pub repeats: usize,
     pub steps: u32,
     pub bundle_resolution: Option<u32>,
+    pub bundles_per_step: Option<u32>,
     pub wide_lines: Option<u32>,
     pub light_visibility: firstshot::direct_light::LightVisibility,
     pub all_cameras: bool,
@@ -202,6 +208,9 @@ impl Config {
         if let Some(r) = self.bundle_resolution {
             o.bundle_resolution = Some(r);
         }
+        if self.bundles_per_step.is_some() {
+            o.bundles_per_step = self.bundles_per_step;
+        }
         if self.wide_lines.is_some() {
             o.wide_lines = self.wide_lines;
         }
@@ -220,6 +229,14 @@ impl Config {
         }
         o
     }
+}
+
+fn parse_bundles_per_step(value: &str) -> Result<u32, String> {
+    let choices = firstshot::iteration::BUNDLES_PER_STEP_CHOICES;
+    value.parse::<u32>().ok().filter(|n| choices.contains(n)).ok_or_else(|| {
+        let listed: Vec<String> = choices.iter().map(u32::to_string).collect();
+        format!("expected one of {}, got {value:?}", listed.join(", "))
+    })
 }
 
 /// `scenes/NAME.toml` for a bare name, else the path itself.
@@ -480,6 +497,7 @@ fn main() -> ExitCode {
         repeats: args.repeats.unwrap_or(if quick { 1 } else { 5 }).max(1),
         steps: args.steps.unwrap_or(if quick { 8 } else { 40 }).max(1),
         bundle_resolution: args.bundle_resolution,
+        bundles_per_step: args.bundles_per_step,
         wide_lines: args.wide_lines,
         light_visibility: match args.light_visibility.as_deref().map(str::parse).transpose() {
             Ok(v) => v.unwrap_or_default(),

@@ -17,11 +17,11 @@
 # FIRSTSHOT_GPU_TESTS=1 tools/gpu/prepare.sh also packs the GPU tests' binaries into
 # .gpu/tests/ (stripped and gzipped, about 3 MB each), for `bash tools/gpu/tests.sh` there:
 # the test suite on the GPU's own driver, which lavapipe's CI cannot be (races, a driver's
-# limits and capabilities). FIRSTSHOT_GPU_TESTS="cli views" packs only those. All 19 come to
-# about 55 MB, more than a call of the device tool carries beside the builds and the tracked
-# files (64 MiB, .whl left behind: the tests do not need it), so pack them in two halves:
-#   "brdf_gpu camera_image cli emitters first_shot firstshot hardening iteration lights"
-#   "limits per_pixel prefix_sum production profile scale scenes shards views hostile"
+# limits and capabilities). The library's unit tests are `firstshot_lib`, the command line's
+# `firstshot`. FIRSTSHOT_GPU_TESTS="cli views" packs only those. All 22 come to about 60 MB,
+# more than a call of the device tool carries beside the builds and the tracked files (64
+# MiB, .whl left behind: the tests do not need it), so pack them in halves, which
+# FIRSTSHOT_GPU_TESTS=1/2 and 2/2 choose (every other binary in name order; k/n for n parts).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 MITSUBA=3.9.1 DRJIT=1.5.0 PY=3.12
@@ -80,17 +80,31 @@ if [ -n "${FIRSTSHOT_GPU_TESTS:-}" ]; then
     skip=" mitsuba slurm kubernetes viewer gltf harness_pure wgsl_validate kernel_bindings scene_load "
     want=" ${FIRSTSHOT_GPU_TESTS} "
     mkdir -p .gpu/tests && rm -f .gpu/tests/*.gz
+    # The library's unit-test binary and the command line's share the crate's name: the
+    # library's is named firstshot_lib. "k/n" keeps every n-th binary of the rest, from the k-th.
     cargo test --release --locked --no-run --lib --tests --message-format=json 2>/dev/null |
         python3 -c "import sys, json
 for l in sys.stdin:
     m = json.loads(l)
     if m.get('reason') == 'compiler-artifact' and m.get('executable') and m['profile']['test']:
-        print(m['target']['name'], m['executable'])" |
+        kind = '_lib' if 'lib' in m['target']['kind'] else ''
+        print(m['target']['name'] + kind, m['executable'])" | sort |
         while read -r name exe; do
             case "$skip" in *" $name "*) continue ;; esac
-            [ "$FIRSTSHOT_GPU_TESTS" = 1 ] || case "$want" in *" $name "*) ;; *) continue ;; esac
-            strip -o ".gpu/tests/$name" "$exe" && gzip -9f ".gpu/tests/$name"
-        done
+            echo "$name $exe"
+        done | {
+            i=0
+            while read -r name exe; do
+                i=$((i + 1))
+                case "$FIRSTSHOT_GPU_TESTS" in
+                1) ;;
+                */*) k=${FIRSTSHOT_GPU_TESTS%/*} n=${FIRSTSHOT_GPU_TESTS#*/}
+                    [ $(((i - 1) % n + 1)) = "$k" ] || continue ;;
+                *) case "$want" in *" $name "*) ;; *) continue ;; esac ;;
+                esac
+                strip -o ".gpu/tests/$name" "$exe" && gzip -9f ".gpu/tests/$name"
+            done
+        }
     ls .gpu/tests
     [ "$(du -sm .gpu | cut -f1)" -lt 48 ] ||
         echo "warning: .gpu is $(du -sh .gpu | cut -f1): with the tracked files, more than a device call carries; pack fewer tests"
