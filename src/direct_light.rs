@@ -71,6 +71,20 @@ pub fn has_moving_lights(scene: &Scene, patches: &Patches) -> bool {
     scene.lights.iter().any(|l| matches!(l, Light::Area { .. })) || !patches.emitters.is_empty()
 }
 
+/// Whether the scene has an environment (`[environment] radiance` not black), which the gather
+/// then sees through each pixel's own ray where the BVH is built (SKY_RAYS in
+/// `wgsl/image_estimate.wgsl`).
+pub fn has_sky(scene: &Scene) -> bool {
+    scene.environment.iter().any(|&c| c > 0.0)
+}
+
+/// Whether `--light-visibility rays` builds the scene's BVH: where the first shot runs and some
+/// light moves its point (area lights, emitting shapes) or the gather asks whether a pixel
+/// sees the environment (`has_sky`). The BVH may still not fit the device (`DirectLights::new`).
+pub fn wants_shadow_bvh(scene: &Scene, patches: &Patches, first_shot: bool) -> bool {
+    first_shot && (has_moving_lights(scene, patches) || has_sky(scene))
+}
+
 /// Texels of both atlases together at most (an id and a depth of 4 bytes each: 256 MiB).
 pub const SHADOW_TEXEL_BUDGET: u64 = 1 << 25;
 /// A directional light's parallel view has this many times the side of a cube face (16 times
@@ -169,6 +183,9 @@ pub struct DirectLights {
     unshadowed: wgpu::Buffer,
     /// Whether `unshadowed` holds the bits (the kernel reads them: SHADOW_SHAFTS).
     pub shafts: bool,
+    /// Whether the gather asks each pixel's own ray for the environment (SKY_RAYS): the scene
+    /// has one (`has_sky`) and the BVH was built.
+    pub sky_rays: bool,
     /// The search for the bits, until `take_shaft_job` hands it to a thread.
     shaft_job: Option<ShaftJob>,
     /// What the search found: patches with some bit, and its milliseconds.
@@ -378,7 +395,7 @@ impl DirectLights {
         // Shadow rays where asked, where some light moves its point, and where the BVH fits
         // the device's bindings (else the windows, as `--stats` reports).
         let bvh = match options.light_visibility {
-            LightVisibility::Rays if first_shot && has_moving_lights(scene, patches) => {
+            LightVisibility::Rays if wants_shadow_bvh(scene, patches, first_shot) => {
                 let binding = ctx.limits().max_storage_buffer_binding_size;
                 crate::shadow_bvh::ShadowBvh::build(&crate::gpu::scene_buffers::raster_triangles(patches)).filter(|b| {
                     let fits = |len: usize, size: usize| (len * size) as u64 <= binding;
@@ -558,6 +575,7 @@ impl DirectLights {
             shadow_frame: bvh.as_ref().map_or((glam::Vec3::ZERO, 1.0), |b| b.frame),
             unshadowed,
             shafts,
+            sky_rays: rays && has_sky(scene),
             shaft_job: None,
             shaft_stats: None,
         };
@@ -609,6 +627,23 @@ impl DirectLights {
             ("SHADOW_FRAME_Z", f64::from(centre.z)),
             ("SHADOW_FRAME_SCALE", f64::from(scale)),
             ("SHADOW_SHAFTS", f64::from(u8::from(self.shafts))),
+        ]
+    }
+
+    /// The `override` constants of image_estimate's gathers for the environment: SKY_RAYS, the
+    /// frame of the BVH's boxes that its rays walk (`sky_rays`) and SKY_REACH, a length past
+    /// which a ray from inside the boxes has left them (twice the frame's unit, the largest
+    /// float where the frame degenerates).
+    pub fn sky_specialization(&self) -> [(&'static str, f64); 6] {
+        let (centre, scale) = self.shadow_frame;
+        let reach = (2.02 / f64::from(scale)).min(f64::from(f32::MAX));
+        [
+            ("SKY_RAYS", f64::from(u8::from(self.sky_rays))),
+            ("SKY_REACH", reach),
+            ("SHADOW_FRAME_X", f64::from(centre.x)),
+            ("SHADOW_FRAME_Y", f64::from(centre.y)),
+            ("SHADOW_FRAME_Z", f64::from(centre.z)),
+            ("SHADOW_FRAME_SCALE", f64::from(scale)),
         ]
     }
 

@@ -308,14 +308,23 @@ pub struct GpuBvhNode {
 }
 
 /// A triangle of the shadow rays' BVH, as the segment test wants it: a corner and the two
-/// edges from it (w unused). WGSL: `BvhTriangle`.
+/// edges from it; and which patch a ray that meets it meets (`shadow_bvh::ShadowBvh::build`):
+/// `first_patch` the first patch of its rasterised triangle (the back's, where it has one,
+/// is first_patch + 1), `lattice` corner v0's lattice word, `corners` the lattice corners of v1 and v2
+/// (bits 0-1, 2-3) and `BVH_TRIANGLE_BACK` where a twin reflects its back. WGSL: `BvhTriangle`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable, PartialEq)]
 pub struct GpuBvhTriangle {
-    pub v0: [f32; 4],
-    pub e1: [f32; 4],
-    pub e2: [f32; 4],
+    pub v0: [f32; 3],
+    pub first_patch: u32,
+    pub e1: [f32; 3],
+    pub lattice: u32,
+    pub e2: [f32; 3],
+    pub corners: u32,
 }
+
+/// `GpuBvhTriangle::corners`: the triangle's surface has a twin, its back (first_patch + 1).
+pub const BVH_TRIANGLE_BACK: u32 = 1 << 4;
 
 /// One face of a light sample's window, for the first-shot reduction.
 /// WGSL: `FaceParams`.
@@ -453,7 +462,7 @@ pub fn shared_layouts() -> Vec<StructLayout> {
         layout!(GpuDirectLight => "DirectLight" { position, normal, strength, cone, kind, first_face, faces }),
         layout!(GpuWindowFace => "WindowFace" { view, tile }),
         layout!(GpuBvhNode => "BvhNode" { bounds, link }),
-        layout!(GpuBvhTriangle => "BvhTriangle" { v0, e1, e2 }),
+        layout!(GpuBvhTriangle => "BvhTriangle" { v0, first_patch, e1, lattice, e2, corners }),
         layout!(GpuFaceParams => "FaceParams" { sample, patch_count, rows }),
         layout!(GpuAppendParams => "AppendParams" { sample, patch_count, capacity, factor }),
         layout!(GpuBundle => "Bundle" { direction, axis_u, axis_v, centre, environment, resolution, patch_count, capacity, use_state, image_step, pixel_class, pixel_stride, pixel_shuffle, fine_rect, wide, line_capacity, wide_lines, line_count }),
@@ -475,6 +484,7 @@ pub fn wgsl_constants() -> String {
          const LATTICE_SIDE_MASK: u32 = {LATTICE_SIDE_MASK}u;\n\
          const LATTICE_CORNER_SHIFT: u32 = {LATTICE_CORNER_SHIFT}u;\n\
          const LATTICE_TWINS: u32 = {LATTICE_TWINS}u;\n\
+         const BVH_TRIANGLE_BACK: u32 = {BVH_TRIANGLE_BACK}u;\n\
          const FRAGMENT_FRONT_BIT: u32 = {FRAGMENT_FRONT_BIT}u;\n\
          const BURN_IN_STEP: u32 = {BURN_IN_STEP}u;\n\
          const IMAGE_STEP: u32 = {IMAGE_STEP}u;\n\

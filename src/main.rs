@@ -158,7 +158,9 @@ pub(crate) struct RenderArgs {
     /// every pass, finds what it sees: `rays`, a shadow ray per pixel through a BVH of the
     /// scene's triangles (exact), or `windows`, item buffers rendered at every pass's point
     /// (the paper's; exact where an occluder covers a texel centre). Point, spot and
-    /// directional lights keep their windows, rendered once
+    /// directional lights keep their windows, rendered once. With rays, where the scene has
+    /// an environment, each pixel's gather also finds what it receives by its own ray
+    /// through the BVH (the environment where the ray leaves the scene)
     #[arg(long, value_name = "rays|windows", value_parser = |v: &str| v.parse::<LightVisibility>(), default_value = "rays")]
     light_visibility: LightVisibility,
     /// The camera to render, by name: "camera" for the [camera] table, or a [[cameras]]

@@ -178,13 +178,14 @@ pub fn predict(
     let suns = scene.lights.iter().filter(|l| matches!(l, crate::scene::Light::Directional { .. })).count() as u64;
     let shadow_texels =
         crate::direct_light::SHADOW_TEXEL_BUDGET.min(face * (6 * scene.lights.len() as u64 + 10 * suns));
-    // The shadow rays' BVH (`shadow_bvh`), where area lights or emitting shapes take rays: a
+    // The shadow rays' BVH (`shadow_bvh`), where area lights or emitting shapes take rays or
+    // the gather asks pixels' rays for the environment (`direct_light::wants_shadow_bvh`): a
     // triangle (48 bytes) and at most two nodes (16 bytes each) a rasterised triangle, and a
     // word a patch for the lights it sees past every occluder (`direct_light::ShaftJob`).
     // The windows' texels above stay counted: a BVH that does not fit falls back to them.
     let shadow_bvh_bytes = match options.light_visibility {
         crate::direct_light::LightVisibility::Rays
-            if options.first_shot && crate::direct_light::has_moving_lights(scene, patches) =>
+            if crate::direct_light::wants_shadow_bvh(scene, patches, options.first_shot) =>
         {
             crate::gpu::scene_buffers::raster_triangle_count(patches) * (48 + 2 * 16) + n * 4
         }

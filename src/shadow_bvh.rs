@@ -17,7 +17,7 @@
 //! and half-float boxes; `GpuBvhTriangle`, the triangles in leaf order).
 
 use crate::gpu::scene_buffers::RasterTriangles;
-use crate::layout::{GpuBvhNode, GpuBvhTriangle};
+use crate::layout::{BVH_TRIANGLE_BACK, GpuBvhNode, GpuBvhTriangle, LATTICE_CORNER_SHIFT, VERTEX_TWIN_BIT};
 use glam::{DVec3, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
@@ -44,19 +44,27 @@ impl ShadowBvh {
     /// is left out: it lies in the same plane). `None` for a scene without triangles.
     pub fn build(raster: &RasterTriangles) -> Option<ShadowBvh> {
         let corner = |v: &crate::layout::RasterVertex| Vec3A::from(Vec3::from(v.position));
-        let mut source: Vec<[Vec3A; 3]> = Vec::with_capacity(raster.vertices.len() / 3);
-        for tri in raster.vertices.chunks_exact(3) {
+        let lattice_corner = |word: u32| (word >> LATTICE_CORNER_SHIFT) & 3;
+        // Each kept triangle's corners, and the patch a ray meeting it meets (`hit_patch` in
+        // the kernel): the front's first patch, corner v0's lattice word, v1's and v2's
+        // lattice corners, and whether a twin follows it (its back, patch + 1).
+        let mut source: Vec<([Vec3A; 3], [u32; 3])> = Vec::with_capacity(raster.vertices.len() / 3);
+        for (t, tri) in raster.vertices.chunks_exact(3).enumerate() {
             let corners = [corner(&tri[0]), corner(&tri[1]), corner(&tri[2])];
             // A twin (the back of a two-sided surface) follows its front with the same corners.
-            if source.last().is_some_and(|last| same_corners(last, &corners)) {
+            if let Some(last) = source.last_mut().filter(|last| same_corners(&last.0, &corners)) {
+                last.1[2] |= BVH_TRIANGLE_BACK;
                 continue;
             }
-            source.push(corners);
+            let words = &raster.lattice[3 * t..3 * t + 3];
+            let hit =
+                [tri[0].patch & !VERTEX_TWIN_BIT, words[0], lattice_corner(words[1]) | lattice_corner(words[2]) << 2];
+            source.push((corners, hit));
         }
         if source.is_empty() {
             return None;
         }
-        let triangles: Vec<Triangle> = source.iter().map(|&[v0, v1, v2]| Triangle { v0, v1, v2 }).collect();
+        let triangles: Vec<Triangle> = source.iter().map(|&([v0, v1, v2], _)| Triangle { v0, v1, v2 }).collect();
         let bvh = build_bvh2_from_tris(&triangles, BvhBuildParams::fast_build(), &mut Default::default());
         // Leaves index the triangle table directly: the triangles go in the order of obvhs's
         // primitive indices.
@@ -64,9 +72,9 @@ impl ShadowBvh {
             .primitive_indices
             .iter()
             .map(|&i| {
-                let [v0, v1, v2] = source[i as usize];
-                let v4 = |v: Vec3A| [v.x, v.y, v.z, 0.0];
-                GpuBvhTriangle { v0: v4(v0), e1: v4(v1 - v0), e2: v4(v2 - v0) }
+                let ([v0, v1, v2], [first_patch, lattice, corners]) = source[i as usize];
+                let v3 = |v: Vec3A| [v.x, v.y, v.z];
+                GpuBvhTriangle { v0: v3(v0), first_patch, e1: v3(v1 - v0), lattice, e2: v3(v2 - v0), corners }
             })
             .collect();
         let root = bvh.nodes[0].aabb;
@@ -493,9 +501,10 @@ mod tests {
         let brute: Vec<GpuBvhTriangle> = triangles
             .iter()
             .map(|&[v0, v1, v2]| GpuBvhTriangle {
-                v0: [v0.x, v0.y, v0.z, 0.0],
-                e1: (v1 - v0).extend(0.0).to_array(),
-                e2: (v2 - v0).extend(0.0).to_array(),
+                v0: v0.to_array(),
+                e1: (v1 - v0).to_array(),
+                e2: (v2 - v0).to_array(),
+                ..bytemuck::Zeroable::zeroed()
             })
             .collect();
         let mut rng = crate::rng::StepRng::new(11, 0);
@@ -568,9 +577,10 @@ mod tests {
         };
         let mut rng = crate::rng::StepRng::new(3, 0);
         let own = GpuBvhTriangle {
-            v0: panel[0].extend(0.0).to_array(),
-            e1: (panel[1] - panel[0]).extend(0.0).to_array(),
-            e2: (panel[2] - panel[0]).extend(0.0).to_array(),
+            v0: panel[0].to_array(),
+            e1: (panel[1] - panel[0]).to_array(),
+            e2: (panel[2] - panel[0]).to_array(),
+            ..bytemuck::Zeroable::zeroed()
         };
         let mut crossing_own = 0;
         for _ in 0..400 {
@@ -709,9 +719,10 @@ mod tests {
                 let dir = on_patch - on_light;
                 let hit = brute.iter().any(|t| {
                     let gpu = GpuBvhTriangle {
-                        v0: t[0].as_vec3().extend(0.0).to_array(),
-                        e1: (t[1] - t[0]).as_vec3().extend(0.0).to_array(),
-                        e2: (t[2] - t[0]).as_vec3().extend(0.0).to_array(),
+                        v0: t[0].as_vec3().to_array(),
+                        e1: (t[1] - t[0]).as_vec3().to_array(),
+                        e2: (t[2] - t[0]).as_vec3().to_array(),
+                        ..bytemuck::Zeroable::zeroed()
                     };
                     segment_hits(&gpu, on_light.as_vec3(), dir.as_vec3())
                 });

@@ -1301,3 +1301,86 @@ fn test25_shadow_rays_left_out_where_nothing_can_block_them_change_no_pixel() {
         assert_eq!(differing, 0, "{name}, {iterations} steps: {differing} pixels differ");
     }
 }
+
+/// A small path tracer over the CPU ray caster, for a scene lit by its environment alone:
+/// the radiance arriving at `origin` from `dir`, the environment `sky` where nothing is hit, a
+/// diffuse front's albedo times what arrives there from a cosine-distributed direction
+/// (one-sided: a back is black), `depth` bounces at most.
+fn sky_path(caster: &Caster, origin: DVec3, dir: DVec3, sky: f64, depth: u32, rng: &mut u64) -> f64 {
+    let Some((t, i)) = caster.hit(origin, dir, 1e-7, f64::INFINITY) else { return sky };
+    let tri = &caster.tris[i];
+    if tri.n.dot(dir) >= 0.0 || tri.albedo == 0.0 || depth == 0 {
+        return 0.0;
+    }
+    let mut uniform = || {
+        // splitmix64: the oracle's own generator.
+        *rng = rng.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = *rng;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (u1, u2) = (uniform(), uniform());
+    let (r, phi) = (u1.sqrt(), 2.0 * std::f64::consts::PI * u2);
+    let n = tri.n;
+    let a = if n.x.abs() > 0.9 { DVec3::Y } else { DVec3::X };
+    let (b1, b2) = (n.cross(a).normalize(), n.cross(n.cross(a).normalize()));
+    let next = (r * phi.cos() * b1 + r * phi.sin() * b2 + (1.0 - u1).sqrt() * n).normalize();
+    tri.albedo * sky_path(caster, origin + t * dir, next, sky, depth - 1, rng)
+}
+
+#[test]
+fn test26_fine_geometry_under_a_sky_sees_it_by_each_pixels_own_ray() {
+    // A diffuse Sierpinski fractal (level 3, albedo 0.5) on a black floor, lit by a uniform
+    // sky alone. The gather once found what a pixel receives along a step's direction by the
+    // pixel's line, which stands for x's patch, not x: half a line off x it passes through
+    // tetrahedra x's ray misses, and the sky that lights the fractal came out dark. Where the
+    // scene has a sky and the BVH of the shadow rays, each pixel now asks its own ray
+    // (SKY_RAYS, `ray_received` in wgsl/image_estimate.wgsl). The oracle: a path tracer over
+    // the CPU ray caster (`sky_path`, 4 x 4 points a pixel, 6 paths each, 6 bounces; the
+    // fractal's bounces among its tetrahedra included), its image mean against the render's
+    // (the camera sees floor and fractal only, no sky). Measured on lavapipe at the automatic
+    // bundle (one of 128 a step), 100 steps, against the path tracer's 0.02522 (Mitsuba 3 at
+    // 4 096 samples: 0.02528): 0.02196, 12.9 % dark, by each pixel's line; 0.02531 (+0.3 %) by
+    // its own ray.
+    let text = "format = 1\n[camera]\nposition = [0.0, 2.2, -1.6]\nlook_at = [0.0, 0.2, 0.0]\nup = [0.0, 1.0, 0.0]\n\
+        fov_y = 40.0\nwidth = 48\nheight = 36\n[environment]\nradiance = [1.0, 1.0, 1.0]\n[settings]\npatch_size = 0.25\n\
+        [materials.grey]\ntype = \"diffuse\"\nalbedo = [0.5, 0.5, 0.5]\n\
+        [materials.black]\ntype = \"diffuse\"\nalbedo = [0.0, 0.0, 0.0]\n\
+        [[shapes]]\ntype = \"quad\"\nvertices = [[-3.0, 0.0, -3.0], [-3.0, 0.0, 3.0], [3.0, 0.0, 3.0], [3.0, 0.0, -3.0]]\nmaterial = \"black\"\n\
+        [[shapes]]\ntype = \"sierpinski\"\ncenter = [0.0, 0.21, 0.0]\nsize = 1.0\nlevel = 3\nmaterial = \"grey\"\n";
+    let Some(ctx) = common::gpu() else { return };
+    let (_scratch, scene) = load("sky_fractal", text);
+    let caster = Caster::new(&scene);
+    let (width, height) = (scene.camera.width, scene.camera.height);
+    let mut rng = 7u64;
+    let mut oracle = 0.0;
+    let mut seen_sky = 0usize;
+    for py in 0..height {
+        for px in 0..width {
+            for (x, y) in pixel_grid(px, py, 4) {
+                let (origin, dir) = camera_ray(&scene.camera, width, height, x, y);
+                seen_sky += caster.hit(origin, dir, 1e-7, f64::INFINITY).is_none() as usize;
+                for _ in 0..6 {
+                    oracle += sky_path(&caster, origin, dir, 1.0, 6, &mut rng) / 96.0;
+                }
+            }
+        }
+    }
+    oracle /= (width * height) as f64;
+    assert_eq!(seen_sky, 0, "the camera sees floor and fractal only");
+    let mut options = RenderOptions::from_scene(&scene);
+    (options.iterations, options.seed) = (100, 1);
+    let patches = scene::tessellate(&scene, options.patch_size).unwrap();
+    let rendered = render(&ctx, &scene, &patches, &options).unwrap();
+    let mean = rendered.image.mean()[0];
+    eprintln!(
+        "sky-lit fractal: image mean {mean:.5} against the path tracer's {oracle:.5} ({:+.2} %), {} bundles of {} a step, light visibility {}",
+        100.0 * (mean / oracle - 1.0),
+        rendered.stats.bundles_per_step,
+        rendered.stats.bundle_resolution,
+        rendered.stats.light_visibility
+    );
+    assert!(oracle > 0.01, "the fractal is lit");
+    assert!((mean / oracle - 1.0).abs() < 0.03, "image mean {mean:.5} against {oracle:.5}");
+}

@@ -117,6 +117,17 @@ override SHADOW_FRAME_SCALE: f32 = 1.0;
 // Whether `unshadowed` holds, per patch, the area lights it sees past every occluder
 // (`direct_light::ShaftJob`): a point on such a patch casts no shadow ray to them.
 override SHADOW_SHAFTS: bool = false;
+// True where the scene has an environment (a sky) and the BVH of the shadow rays: the gather
+// finds what x receives along the step's direction by x's own ray through the BVH
+// (`ray_received`) instead of by its line. The line stands for a patch, not for x: about half
+// a line off x it passes through surfaces x's ray misses and beside ones it hits, and where
+// the environment lights fine geometry (a fractal under a sky) it shaded x by those: a
+// diffuse Sierpinski fractal lit by a sky alone came out 20 % dark at the automatic four
+// bundles of 96 lines (docs/PERFORMANCE.md, "The sky by each pixel's own ray").
+override SKY_RAYS: bool = false;
+// How far x's ray goes (`nearest_hit`): past the BVH's box from any point in it (every corner
+// lies within 1 / SHADOW_FRAME_SCALE of its centre; the host computes it in f64).
+override SKY_REACH: f32 = 1.0;
 
 fn has_light(kind: u32) -> bool {
     return (LIGHT_KINDS & (1u << kind)) != 0u;
@@ -163,6 +174,25 @@ fn segment_crosses(a: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, y: vec3<f32>, dir
     return t > SEGMENT_EPSILON && t < 1.0 - SEGMENT_EPSILON;
 }
 
+// Where the line y + t dir meets the triangle with corner a and edges e1, e2 (Moller-Trumbore,
+// either side): (t, u, v), the point a + u e1 + v e2; t = -1 where it misses.
+fn triangle_crossing(a: vec3<f32>, e1: vec3<f32>, e2: vec3<f32>, y: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
+    let p = cross(dir, e2);
+    let det = dot(e1, p);
+    if (abs(det) < 1e-30) {
+        return vec3<f32>(-1.0);
+    }
+    let inv = 1.0 / det;
+    let s = y - a;
+    let u = dot(s, p) * inv;
+    let q = cross(s, e1);
+    let v = dot(dir, q) * inv;
+    if (u < 0.0 || u > 1.0 || v < 0.0 || u + v > 1.0) {
+        return vec3<f32>(-1.0);
+    }
+    return vec3<f32>(dot(e2, q) * inv, u, v);
+}
+
 // Whether the segment from y to x (its ends left out) crosses patch k.
 fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
     let a = patches_at(k).v0.xyz;
@@ -171,7 +201,7 @@ fn segment_hits(k: u32, y: vec3<f32>, x: vec3<f32>) -> bool {
 
 // Whether the segment y + t dir (its ends left out) crosses triangle k of the shadow rays' BVH.
 fn shadow_triangle_hit(k: u32, y: vec3<f32>, dir: vec3<f32>) -> bool {
-    return segment_crosses(shadow_triangles[k].v0.xyz, shadow_triangles[k].e1.xyz, shadow_triangles[k].e2.xyz, y, dir);
+    return segment_crosses(shadow_triangles[k].v0, shadow_triangles[k].e1, shadow_triangles[k].e2, y, dir);
 }
 
 // A coordinate of magnitude m is held in f32 to m x 2^-23; a point computed on a surface (x
@@ -252,6 +282,95 @@ fn occluded(light_point: vec3<f32>, n_y: vec3<f32>, surface_point: vec3<f32>, n_
         node = select(link, node + 1u, leaf);
     }
     return false;
+}
+
+// The nearest triangle of the BVH that x's ray x + t toward meets, past x's own surface and
+// within SKY_REACH (past the BVH's box): its index k (NO_HIT where the ray leaves the scene)
+// and the point's barycentric coordinates (u, v) on it. `occluded`'s walk, with the segment
+// cut short at the nearest hit so far.
+const NO_HIT: u32 = 0xffffffffu;
+
+struct Hit {
+    k: u32,
+    u: f32,
+    v: f32,
+}
+
+fn nearest_hit(x: vec3<f32>, n: vec3<f32>, toward: vec3<f32>) -> Hit {
+    let y = lifted(x, n, x + toward);
+    let dir = toward * SKY_REACH;
+    let origin = (y - vec3<f32>(SHADOW_FRAME_X, SHADOW_FRAME_Y, SHADOW_FRAME_Z)) * SHADOW_FRAME_SCALE;
+    let scaled = dir * SHADOW_FRAME_SCALE;
+    let inv = 1.0 / select(scaled, vec3<f32>(1e-30), abs(scaled) < vec3<f32>(1e-30));
+    var best = Hit(NO_HIT, 0.0, 0.0);
+    var nearest = 1.0;
+    let end = arrayLength(&shadow_nodes);
+    var node = 0u;
+    while (node < end) {
+        let bounds = shadow_nodes[node].bounds;
+        let a = halves(bounds.x);
+        let b = halves(bounds.y);
+        let c = halves(bounds.z);
+        let t0 = (vec3<f32>(a, b.x) - origin) * inv;
+        let t1 = (vec3<f32>(b.y, c) - origin) * inv;
+        let lo = min(t0, t1);
+        let hi = max(t0, t1);
+        let near = max(max(lo.x, lo.y), max(lo.z, SEGMENT_EPSILON));
+        let far = min(min(hi.x, hi.y), min(hi.z, nearest));
+        let link = shadow_nodes[node].link;
+        let leaf = (link & SHADOW_LEAF) != 0u;
+        if (near <= far) {
+            if (!leaf) {
+                node++;
+                continue;
+            }
+            let first = (link & ~SHADOW_LEAF) >> SHADOW_LEAF_COUNT_BITS;
+            let last = first + (link & ((1u << SHADOW_LEAF_COUNT_BITS) - 1u));
+            for (var k = first; k <= last; k++) {
+                let h = triangle_crossing(shadow_triangles[k].v0, shadow_triangles[k].e1, shadow_triangles[k].e2, y, dir);
+                if (h.x > SEGMENT_EPSILON && h.x < nearest) {
+                    nearest = h.x;
+                    best = Hit(k, h.y, h.z);
+                }
+            }
+        }
+        node = select(link, node + 1u, leaf);
+    }
+    return best;
+}
+
+// The patch (index + 1) whose side facing the ray holds the point `hit` of its triangle:
+// the front's patch where the triangle faces the ray, its twin's where it has one, else
+// NO_PATCH (a one-sided surface's back, black). A lattice's point lies in the patch of its
+// lattice coordinates (`lattice_patch`), from its corners' (`GpuBvhTriangle::corners`).
+fn hit_patch(hit: Hit, toward: vec3<f32>) -> u32 {
+    let tri = shadow_triangles[hit.k];
+    let word = tri.lattice & ~(3u << LATTICE_CORNER_SHIFT);
+    let c0 = lattice_corner(tri.lattice);
+    let c1 = lattice_corner(word | ((tri.corners & 3u) << LATTICE_CORNER_SHIFT));
+    let c2 = lattice_corner(word | (((tri.corners >> 2u) & 3u) << LATTICE_CORNER_SHIFT));
+    let at = c0 + hit.u * (c1 - c0) + hit.v * (c2 - c0);
+    if (dot(cross(tri.e1, tri.e2), toward) < 0.0) {
+        return lattice_patch(tri.first_patch, tri.lattice, at) + 1u;
+    }
+    if ((tri.corners & BVH_TRIANGLE_BACK) != 0u) {
+        return lattice_patch(tri.first_patch + 1u, tri.lattice, at) + 1u;
+    }
+    return NO_PATCH;
+}
+
+// What x receives along `toward` by its own ray (SKY_RAYS): the environment where the ray
+// leaves the scene, black where it meets a back, else what the patch it meets sends.
+fn ray_received(at: Seen, toward: vec3<f32>) -> Received {
+    let hit = nearest_hit(at.x, at.n, toward);
+    if (hit.k == NO_HIT) {
+        return received_const(this_bundle.environment.rgb, true);
+    }
+    let id = hit_patch(hit, toward);
+    if (id == NO_PATCH) {
+        return received_const(vec3<f32>(0.0), true);
+    }
+    return received_from(id - 1u, at.x, toward);
 }
 
 // The id at texel `at` of atlas `atlas` (WindowFace::tile.w: 0 the kept faces', 1 the
@@ -1071,6 +1190,27 @@ fn class_pixel(block: vec2<u32>) -> vec2<u32> {
     return block * 2u + vec2<u32>(offset & 1u, offset >> 1u);
 }
 
+// What x receives along `toward` by its line (without SKY_RAYS): what x's patch receives
+// there (`own_received`), else, fused, by the lines beside and the nearest candidates
+// (`edge_received`); split, the pixel is listed for `gather_edges` (with x's place on its
+// line, so that it need not search it again), its Le added here with a count of 0 (Le in
+// that pass's loop made it twice as slow on lavapipe), and the answer left undecided.
+fn line_received(at: Seen, toward: vec3<f32>, s: f32, pixel: u32, emitted: vec3<f32>) -> Received {
+    let line = on_line(at.x, s);
+    let received = own_received(at.j, at.x, toward, line);
+    if (received.decided) {
+        return received;
+    }
+    if (FUSED_GATHER) {
+        return edge_received(at, toward, s, line.lo);
+    }
+    let listed = atomicAdd(&edges[0], 1u);
+    atomicStore(&edges[2u * listed + 1u], pixel);
+    atomicStore(&edges[2u * listed + 2u], line.lo);
+    image_sum[pixel] = image_sum[pixel] + vec4<f32>(emitted, 0.0);
+    return received;
+}
+
 // G: the indirect light gathered through this step's bundle, added to the second half of
 // the image sum (bound here as image_sum). A pixel whose patch has no fragment of its own
 // near x on x's line is listed in `edges` instead (edges[0] counts them, the host clears
@@ -1097,19 +1237,13 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
         let d = this_bundle.direction.xyz;
         let s = bundle_side(at.n, d);
         let toward = s * d;
-        let line = on_line(at.x, s);
-        var received = own_received(at.j, at.x, toward, line);
-        if (!received.decided) {
-            if (FUSED_GATHER) {
-                received = edge_received(at, toward, s, line.lo);
-            } else {
-                // With x's place on its line, so that gather_edges need not search it again.
-                let listed = atomicAdd(&edges[0], 1u);
-                atomicStore(&edges[2u * listed + 1u], pixel);
-                atomicStore(&edges[2u * listed + 2u], line.lo);
-                // Le here, with a count of 0; G and the count in gather_edges (Le in its loop
-                // made that pass twice as slow on lavapipe).
-                image_sum[pixel] = image_sum[pixel] + vec4<f32>(radiance, 0.0);
+        var received: Received;
+        if (SKY_RAYS) {
+            received = ray_received(at, toward);
+        } else {
+            received = line_received(at, toward, s, pixel, radiance);
+            if (!received.decided) {
+                // Listed for gather_edges, which adds G and the count.
                 return;
             }
         }

@@ -152,9 +152,12 @@ struct BvhNode {
 
 // A triangle of the shadow rays' BVH (Rust: GpuBvhTriangle): a corner and its two edges.
 struct BvhTriangle {
-    v0: vec4<f32>,
-    e1: vec4<f32>,
-    e2: vec4<f32>,
+    v0: vec3<f32>,
+    first_patch: u32,
+    e1: vec3<f32>,
+    lattice: u32,
+    e2: vec3<f32>,
+    corners: u32,
 }
 
 // One face of a light sample's window (Rust: GpuFaceParams).
