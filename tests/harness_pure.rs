@@ -166,7 +166,7 @@ fn test10_the_gpu_scripts_parse() {
     // none, so at least a syntax error must not wait for that day. `bash -n` parses without
     // running.
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    for script in ["tools/gpu/prepare.sh", "tools/gpu/run.sh"] {
+    for script in ["tools/gpu/prepare.sh", "tools/gpu/run.sh", "tools/gpu/tests.sh"] {
         let out = std::process::Command::new("bash").arg("-n").arg(root.join(script)).output().expect("bash runs");
         assert!(out.status.success(), "{script}: {}", String::from_utf8_lossy(&out.stderr));
     }
