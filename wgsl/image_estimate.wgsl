@@ -236,6 +236,20 @@ fn halves(word: u32) -> vec2<f32> {
     return select(normal, small, exponent == vec2<u32>(0u));
 }
 
+// The span (entry, exit) of the line origin + t dir (in the tree's frame, inv = 1 / dir) within
+// node `node`'s box: empty where entry > exit.
+fn node_span(node: u32, origin: vec3<f32>, inv: vec3<f32>) -> vec2<f32> {
+    let bounds = shadow_nodes[node].bounds;
+    let a = halves(bounds.x);
+    let b = halves(bounds.y);
+    let c = halves(bounds.z);
+    let t0 = (vec3<f32>(a, b.x) - origin) * inv;
+    let t1 = (vec3<f32>(b.y, c) - origin) * inv;
+    let lo = min(t0, t1);
+    let hi = max(t0, t1);
+    return vec2<f32>(max(max(lo.x, lo.y), lo.z), min(min(hi.x, hi.y), hi.z));
+}
+
 // Whether some triangle of the scene crosses the segment from y (on a light of normal n_y) to
 // x (on a surface of normal n_x), its ends moved off their surfaces (`lifted`) and left out: a
 // shadow ray through the BVH (`shadow_bvh::ShadowBvh::occluded` is the same walk on the host).
@@ -254,16 +268,9 @@ fn occluded(light_point: vec3<f32>, n_y: vec3<f32>, surface_point: vec3<f32>, n_
     let end = arrayLength(&shadow_nodes);
     var node = 0u;
     while (node < end) {
-        let bounds = shadow_nodes[node].bounds;
-        let a = halves(bounds.x);
-        let b = halves(bounds.y);
-        let c = halves(bounds.z);
-        let t0 = (vec3<f32>(a, b.x) - origin) * inv;
-        let t1 = (vec3<f32>(b.y, c) - origin) * inv;
-        let lo = min(t0, t1);
-        let hi = max(t0, t1);
-        let near = max(max(lo.x, lo.y), max(lo.z, SEGMENT_EPSILON));
-        let far = min(min(hi.x, hi.y), min(hi.z, 1.0 - SEGMENT_EPSILON));
+        let span = node_span(node, origin, inv);
+        let near = max(span.x, SEGMENT_EPSILON);
+        let far = min(span.y, 1.0 - SEGMENT_EPSILON);
         let link = shadow_nodes[node].link;
         let leaf = (link & SHADOW_LEAF) != 0u;
         if (near <= far) {
@@ -307,16 +314,9 @@ fn nearest_hit(x: vec3<f32>, n: vec3<f32>, toward: vec3<f32>) -> Hit {
     let end = arrayLength(&shadow_nodes);
     var node = 0u;
     while (node < end) {
-        let bounds = shadow_nodes[node].bounds;
-        let a = halves(bounds.x);
-        let b = halves(bounds.y);
-        let c = halves(bounds.z);
-        let t0 = (vec3<f32>(a, b.x) - origin) * inv;
-        let t1 = (vec3<f32>(b.y, c) - origin) * inv;
-        let lo = min(t0, t1);
-        let hi = max(t0, t1);
-        let near = max(max(lo.x, lo.y), max(lo.z, SEGMENT_EPSILON));
-        let far = min(min(hi.x, hi.y), min(hi.z, nearest));
+        let span = node_span(node, origin, inv);
+        let near = max(span.x, SEGMENT_EPSILON);
+        let far = min(span.y, nearest);
         let link = shadow_nodes[node].link;
         let leaf = (link & SHADOW_LEAF) != 0u;
         if (near <= far) {
