@@ -779,4 +779,36 @@ mod tests {
         with_box.push([d(-0.2, 0.5, -2.0), d(0.6, 0.5, -2.0), d(0.1, 0.5, -1.2)]);
         assert!(!shaft(&with_box), "a triangle between the patch and the light blocks it");
     }
+
+    #[test]
+    fn test10_each_triangle_names_the_patches_a_ray_meets() {
+        // The kernel's `hit_patch` reads a hit's patch off its triangle: the front's first
+        // patch, corner v0's lattice word, v1's and v2's lattice corners, and whether a twin
+        // (the back, first patch + 1) follows. A lattice of side 3 with twins, drawn as
+        // raster_triangles draws it (the front, then the back with the winding reversed), and
+        // a one-sided triangle of one patch.
+        use crate::layout::{LATTICE_TWINS, RasterVertex};
+        let mut r = RasterTriangles::default();
+        let mut push = |t: [Vec3; 3], corners: [u32; 3], patch: u32, word: u32| {
+            for (v, corner) in t.into_iter().zip(corners) {
+                r.vertices.push(RasterVertex { position: v.to_array(), patch });
+                r.lattice.push(word | corner << LATTICE_CORNER_SHIFT);
+            }
+        };
+        let (a, b, c) = (Vec3::ZERO, Vec3::X, Vec3::Y);
+        push([a, b, c], [0, 1, 2], 10, 3 | LATTICE_TWINS);
+        push([a, c, b], [0, 2, 1], 11, 3 | LATTICE_TWINS);
+        let far = Vec3::Z * 2.0;
+        push([a + far, b + far, c + far], [0, 1, 2], 28 | VERTEX_TWIN_BIT, 1);
+        let bvh = ShadowBvh::build(&r).expect("a tree");
+        assert_eq!(bvh.triangles.len(), 2, "the back is no triangle of its own");
+        for t in &bvh.triangles {
+            if t.v0[2] == 0.0 {
+                assert_eq!((t.first_patch, t.lattice), (10, 3 | LATTICE_TWINS));
+                assert_eq!(t.corners, 1 | 2 << 2 | BVH_TRIANGLE_BACK);
+            } else {
+                assert_eq!((t.first_patch, t.lattice, t.corners), (28, 1, 1 | 2 << 2));
+            }
+        }
+    }
 }
