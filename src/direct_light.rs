@@ -605,14 +605,14 @@ impl DirectLights {
     /// kinds of light it holds (bit `1 << LIGHT_*`), the face counts of their windows (bit
     /// `1 << faces`) and the atlases their faces lie in (bit `1 << KEPT`, `1 << PER_PASS`),
     /// so that the kernel is compiled without the others' code. An empty table keeps the
-    /// defaults (every kind): nothing is evaluated then.
-    pub fn specialization(&self) -> [(&'static str, f64); 9] {
+    /// defaults (every kind): nothing is evaluated then. The BVH's frame is in
+    /// `bvh_specialization`, which every pipeline of the kernel takes.
+    pub fn specialization(&self) -> [(&'static str, f64); 5] {
         let bit = |n: u32| 1u32.checked_shl(n).unwrap_or(u32::MAX);
         let kinds = self.table.iter().fold(0u32, |bits, l| bits | bit(l.kind));
         let faces = self.table.iter().fold(0u32, |bits, l| bits | bit(l.faces));
         let atlases = self.faces.iter().fold(0u32, |bits, f| bits | bit(f.tile[3]));
         let rays = ("SHADOW_RAYS", f64::from(u8::from(self.visibility == LightVisibility::Rays)));
-        let (centre, scale) = self.shadow_frame;
         let (kinds, faces, atlases) = match self.table.is_empty() {
             true => (u32::MAX as f64, u32::MAX as f64, 3.0),
             false => (kinds as f64, faces as f64, atlases as f64),
@@ -622,19 +622,15 @@ impl DirectLights {
             ("WINDOW_FACE_COUNTS", faces),
             ("ATLASES", atlases),
             rays,
-            ("SHADOW_FRAME_X", f64::from(centre.x)),
-            ("SHADOW_FRAME_Y", f64::from(centre.y)),
-            ("SHADOW_FRAME_Z", f64::from(centre.z)),
-            ("SHADOW_FRAME_SCALE", f64::from(scale)),
             ("SHADOW_SHAFTS", f64::from(u8::from(self.shafts))),
         ]
     }
 
-    /// The `override` constants of image_estimate's gathers for the environment: SKY_RAYS, the
-    /// frame of the BVH's boxes that its rays walk (`sky_rays`) and SKY_REACH, a length past
-    /// which a ray from inside the boxes has left them (twice the frame's unit, the largest
-    /// float where the frame degenerates).
-    pub fn sky_specialization(&self) -> [(&'static str, f64); 6] {
+    /// The `override` constants of the BVH's walks in image_estimate, for every pipeline of it:
+    /// the frame of the BVH's boxes (the direct light's shadow rays, the gathers' pixel rays),
+    /// SKY_RAYS (`sky_rays`) and SKY_REACH, a length past which a ray from inside the boxes has
+    /// left them (twice the frame's unit, the largest float where the frame degenerates).
+    pub fn bvh_specialization(&self) -> [(&'static str, f64); 6] {
         let (centre, scale) = self.shadow_frame;
         let reach = (2.02 / f64::from(scale)).min(f64::from(f32::MAX));
         [

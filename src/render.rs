@@ -1045,12 +1045,12 @@ impl<'a> Renderer<'a> {
         // device sat idle), and the search for the patches that see an area light past every
         // occluder (`direct_light::ShaftJob`: their pixels cast no shadow ray).
         let (paging, scene_constants, lights) = (buffers.paging(), buffers.constants(), direct.specialization());
-        let sky = direct.sky_specialization();
+        let bvh = direct.bvh_specialization();
         let passes = crate::stages::image_estimate::fused_gather(&ctx.summary, options.gather);
         let (burn_in_walk, image_pipelines, shaft_bits, first_shot) = std::thread::scope(|s| {
             let walk = s.spawn(|| burn_in_steps(scene, patches, options, per_step));
             let pipelines = s.spawn(|| {
-                ImagePipelines::build(&ctx.device, paging, &scene_constants, &lights, &sky, per_point, passes)
+                ImagePipelines::build(&ctx.device, paging, &scene_constants, &lights, &bvh, per_point, passes)
             });
             let shafts = shaft_job.map(|job| {
                 s.spawn(move || {

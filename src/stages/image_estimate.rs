@@ -231,35 +231,34 @@ impl ImagePipelines {
     /// `first_bounce_per_point`: the gather evaluates each sender's first reflection of the
     /// lights at the point it sees (`render::first_bounce_per_point`).
     /// `passes`: how the gather finishes its pixels (`fused_gather`).
-    /// `sky`: `DirectLights::sky_specialization`, whether the gathers ask each pixel's ray
-    /// for the environment.
+    /// `bvh`: `DirectLights::bvh_specialization`, the BVH's frame and whether the gathers ask
+    /// each pixel's ray for the environment, for every pipeline.
     pub fn build(
         device: &wgpu::Device,
         paging: crate::gpu::kernel::Paging,
         scene_constants: &[(&'static str, f64)],
         lights: &[(&'static str, f64)],
-        sky: &[(&'static str, f64)],
+        bvh: &[(&'static str, f64)],
         first_bounce_per_point: bool,
         passes: GatherPasses,
     ) -> Self {
         let split = matches!(passes, GatherPasses::Split { .. });
-        let sky_rays = sky.iter().any(|&(name, value)| name == "SKY_RAYS" && value != 0.0);
+        let sky_rays = bvh.iter().any(|&(name, value)| name == "SKY_RAYS" && value != 0.0);
         let built = SPEC.build_paged(device, paging);
-        // The sky's constants (SKY_RAYS, the BVH's frame) in every pipeline: the direct light's
-        // shadow rays read the same frame.
-        let with_scene = |constants: &[(&'static str, f64)]| merged(&[constants, scene_constants, sky]);
+        let with_scene = |constants: &[(&'static str, f64)]| [constants, scene_constants, bvh].concat();
         // Compiled for the kinds of light the table holds (the kernel's LIGHT_KINDS).
         let lights = with_scene(lights);
         let per_point = with_scene(&[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)]);
         // Fused, the gather evaluates the direct light at near senders' points itself, so it
         // is compiled for the lights too.
         let gather = match passes {
-            GatherPasses::Fused => merged(&[
+            GatherPasses::Fused => [
                 &[("SEEN_IN_GATHER", 1.0), ("FUSED_GATHER", 1.0)],
                 lights.as_slice(),
                 &[("FIRST_BOUNCE_PER_POINT", first_bounce_per_point as u32 as f64)],
-            ]),
-            GatherPasses::Split { .. } => merged(&[&[("SEEN_IN_GATHER", 1.0)], per_point.as_slice()]),
+            ]
+            .concat(),
+            GatherPasses::Split { .. } => [&[("SEEN_IN_GATHER", 1.0)], per_point.as_slice()].concat(),
         };
         // Built side by side: a CPU adapter compiles each pipeline on the thread that asks for
         // it (about 190 ms for the four on lavapipe, one after another).
@@ -286,19 +285,6 @@ impl ImagePipelines {
             }
         })
     }
-}
-
-/// The `override` constants of `lists`, each name once: a later list's value replaces an
-/// earlier one's (the direct light's and the sky's share the BVH's frame).
-fn merged(lists: &[&[(&'static str, f64)]]) -> Vec<(&'static str, f64)> {
-    let mut out: Vec<(&'static str, f64)> = Vec::new();
-    for &(name, value) in lists.iter().flat_map(|l| l.iter()) {
-        match out.iter_mut().find(|(n, _)| *n == name) {
-            Some(entry) => entry.1 = value,
-            None => out.push((name, value)),
-        }
-    }
-    out
 }
 
 impl ImageEstimate {
