@@ -389,7 +389,7 @@ impl DirectLights {
             let centre = triangles[0].0.iter().sum::<DVec3>() / 3.0;
             sources.push((Source::Area { radiance: emitter.radiance, shared: true, triangles }, centre));
         }
-        let near = buffers.radius * 1e-6;
+        let near = buffers.radius * crate::stages::camera_item_buffer::NEAR_OF_RADIUS;
         let bounds = (buffers.centre, buffers.radius);
         let max_side = ctx.limits().max_texture_dimension_2d;
         // Shadow rays where asked, where some light moves its point, and where the BVH fits

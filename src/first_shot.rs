@@ -170,7 +170,7 @@ pub fn run(
     // Every pair fits when each patch sees every sample; start there when that is small,
     // else grow on overflow below.
     let mut capacity = crate::memory::initial_pair_capacity(&limits, buffers.page_bytes, n, samples) as u32;
-    let near = buffers.radius * 1e-6;
+    let near = buffers.radius * crate::stages::camera_item_buffer::NEAR_OF_RADIUS;
     let item_buffer = CameraItemBuffer::new(device, resolution, resolution, 1, None);
     loop {
         let reduce = FirstShotReduce::new(device, buffers, &item_buffer, capacity);

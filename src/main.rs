@@ -648,7 +648,8 @@ fn run(args: RenderArgs) -> Result<(), Failure> {
         patches.patches.len(),
         patches.samples.len()
     ));
-    for note in patches.notes.iter().chain(&options.coarse_bundle_note(&scene, &patches)) {
+    let camera_notes = firstshot::render::camera_notes(&scene, &patches, &options);
+    for note in patches.notes.iter().chain(&options.coarse_bundle_note(&scene, &patches)).chain(&camera_notes) {
         say.say(format!("note: {note}"));
     }
     let resume = read_resume(&args, &plan, &scene, &patches, &options)?;

@@ -372,6 +372,32 @@ impl RenderOptions {
     }
 }
 
+/// A note for each view with a surface nearer its camera than the views' near distance
+/// (`camera_item_buffer::NEAR_OF_RADIUS` of the scene's radius), which the camera's item buffer
+/// cuts off: the image would lack what lies there without a word. (Only where the scene is
+/// large against the camera's distance to it, 2^20 times: single-precision positions cannot
+/// place such a surface apart from the eye either.)
+pub fn camera_notes(scene: &Scene, patches: &Patches, options: &RenderOptions) -> Vec<String> {
+    let radius = crate::gpu::scene_buffers::bounding_sphere(patches).1;
+    let near = radius * crate::stages::camera_item_buffer::NEAR_OF_RADIUS;
+    let mut notes = Vec::new();
+    for view in options.views(scene) {
+        let Some(d) = crate::scene::tessellate::nearest_patch_distance(patches, view.camera.position) else {
+            continue;
+        };
+        if d < near {
+            notes.push(format!(
+                "camera \"{}\": a surface lies {d:.3e} from it, nearer than the {near:.3e} (2^-20 of the scene's \
+                 radius {radius:.3e}) within which the GPU's single-precision positions cannot tell a surface from \
+                 the eye, so the image leaves out what lies that near: move the camera away from the surface, or \
+                 make the scene smaller around it",
+                view.name
+            ));
+        }
+    }
+    notes
+}
+
 /// Whether the image's gather evaluates a near sender's first reflection of the first-shot
 /// lights at the point it meets it, instead of taking the sender's patch-level Lfs
 /// (docs/ALGORITHM.md 6, "Near senders' first bounce per point"): with first shot, unless an
@@ -1132,7 +1158,7 @@ impl<'a> Renderer<'a> {
             hemicube_resolution,
             bundle_resolution,
             per_step,
-            near: buffers.radius * 1e-5,
+            near: buffers.radius * crate::stages::camera_item_buffer::NEAR_OF_RADIUS,
             buffers,
             direct,
             views,
@@ -1158,6 +1184,7 @@ impl<'a> Renderer<'a> {
                 .chain(&patches.notes)
                 .cloned()
                 .chain(given.coarse_bundle_note_with(needs))
+                .chain(camera_notes(scene, patches, given))
                 .collect(),
         })
     }

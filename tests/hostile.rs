@@ -92,3 +92,65 @@ fn test02_extreme_numbers_render_or_are_refused() {
     let (code, stderr) = survives("too-many-patches", &quad("1"), &["--patch-size", "1e-5"]);
     assert_eq!(code, 2, "{stderr}");
 }
+
+/// A camera a tenth of a unit from a glowing unit square in a scene 100 000 units across (a far
+/// backdrop): 2e-6 of the scene's radius, which the camera's near distance (1e-5 radii before
+/// 2026-11-30) cut off, rendering the square black. Now it is in the image; and nearer than
+/// the near distance, 2^-20 radii (where single-precision positions cannot tell the square from
+/// the eye), the render says so instead of dropping it without a word.
+#[test]
+fn test03_a_surface_near_the_camera_in_a_large_scene_is_seen_or_named() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let render = |distance: f64| {
+        let dir = Scratch::new("hostile", &format!("near-{}", (distance * 1000.0) as u32));
+        let text = format!(
+            r#"format = 1
+[camera]
+position = [0.5, 0.5, {distance}]
+look_at = [0.5, 0.5, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y = 40.0
+width = 16
+height = 16
+[materials.white]
+type = "diffuse"
+albedo = [0.5, 0.5, 0.5]
+[[shapes]]
+type = "quad"
+vertices = [[0,0,0],[1,0,0],[1,1,0],[0,1,0]]
+material = "white"
+emission = [1,1,1]
+[[shapes]]
+type = "quad"
+vertices = [[0,0,-1e5],[0,1,-1e5],[1,1,-1e5],[1,0,-1e5]]
+material = "white"
+"#
+        );
+        let path = dir.join("scene.toml");
+        std::fs::write(&path, text).unwrap();
+        let (exr, stats) = (dir.join("x.exr"), dir.join("x.json"));
+        let out = firstshot()
+            .arg(&path)
+            .args(["--quiet", "--iterations", "2", "--out"])
+            .arg(&exr)
+            .arg("--stats")
+            .arg(&stats)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        let notes: Vec<String> =
+            stats["notes"].as_array().unwrap().iter().map(|n| n.as_str().unwrap().to_string()).collect();
+        (firstshot::image::Image::read_exr(&exr).unwrap().mean()[0], notes)
+    };
+    // The square fills the view (tan 20 degrees * 0.1 < 0.5), so every pixel sees its
+    // emission: 1, plus nothing it could reflect.
+    let (seen, notes) = render(0.1);
+    assert!((seen - 1.0).abs() < 1e-3, "mean {seen}, expected the square's emission 1");
+    assert!(notes.iter().all(|n| !n.contains("nearer than")), "{notes:?}");
+    // 0.01 is under 2^-20 of the radius (0.048): cut off, and said.
+    let (_, notes) = render(0.01);
+    assert!(notes.iter().any(|n| n.contains("camera \"camera\"") && n.contains("nearer than")), "{notes:?}");
+}

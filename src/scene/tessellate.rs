@@ -626,6 +626,50 @@ pub fn scene_bounds(patches: &Patches) -> (DVec3, f64) {
     (center, radius)
 }
 
+/// The distance from `point` to the nearest patch (0 on one), or `None` without patches: what
+/// a camera there may see nearest (`render::camera_notes`). All cores, one pass.
+pub fn nearest_patch_distance(patches: &Patches, point: DVec3) -> Option<f64> {
+    use rayon::prelude::*;
+    patches
+        .patches
+        .par_iter()
+        .map(|p| closest_point_on_triangle(point, p.vertices).distance(point))
+        .reduce_with(f64::min)
+}
+
+/// The point of triangle `[a, b, c]` nearest `p`: by which of the triangle's seven regions
+/// (three corners, three edges, the inside) the projection of `p` falls in, each told by the
+/// signs of dot products with the edges (Ericson, Real-Time Collision Detection, 5.1.5).
+pub fn closest_point_on_triangle(p: DVec3, [a, b, c]: [DVec3; 3]) -> DVec3 {
+    let (ab, ac) = (b - a, c - a);
+    let (d1, d2) = (ab.dot(p - a), ac.dot(p - a));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let (d3, d4) = (ab.dot(p - b), ac.dot(p - b));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let (d5, d6) = (ab.dot(p - c), ac.dot(p - c));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let inside = 1.0 / (va + vb + vc);
+    a + ab * (vb * inside) + ac * (vc * inside)
+}
+
 /// A surface triangle, checked, with what its patches share.
 struct SourceTriangle {
     vertices: [DVec3; 3],
@@ -804,6 +848,54 @@ pub(crate) mod tests {
     /// Patches are built from the same f64 numbers as their source: what is exact on paper
     /// may be off by a few ulps of the scene's size, never more.
     const ROUNDING: f64 = 1e-12;
+
+    /// Against a dense grid of the triangle's points (a different computation: no regions),
+    /// for points all around random triangles, slivers among them: the closest point is never
+    /// farther than the grid's best and at most the grid's spacing nearer, and it lies on the
+    /// triangle.
+    #[test]
+    fn the_closest_point_on_a_triangle_is_the_nearest_of_its_points() {
+        let mut rng = Pcg64::seed_from_u64(7);
+        let mut u = || (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0;
+        let n = 200;
+        for case in 0..300 {
+            let mut tri = [0; 3].map(|_| DVec3::new(u(), u(), u()));
+            if case % 10 == 0 {
+                tri[2] = tri[0].lerp(tri[1], 0.3) + DVec3::new(u(), u(), u()) * 1e-3;
+            }
+            let p = DVec3::new(u(), u(), u()) * 2.0;
+            let q = closest_point_on_triangle(p, tri);
+            let mut grid_best = f64::INFINITY;
+            for j in 0..=n {
+                for i in 0..=n - j {
+                    let (b1, b2) = (i as f64 / n as f64, j as f64 / n as f64);
+                    let x = tri[0] + (tri[1] - tri[0]) * b1 + (tri[2] - tri[0]) * b2;
+                    grid_best = grid_best.min(x.distance(p));
+                }
+            }
+            let longest = (0..3).map(|k| tri[k].distance(tri[(k + 1) % 3])).fold(0.0, f64::max);
+            let d = q.distance(p);
+            assert!(d <= grid_best + 1e-12, "case {case}: {d} farther than the grid's {grid_best}");
+            assert!(d >= grid_best - longest / n as f64, "case {case}: {d} too near ({grid_best})");
+            // On the triangle: in its plane and inside its three edges.
+            let normal = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+            assert!(normal.dot(q - tri[0]).abs() <= 1e-9 * normal.length(), "case {case}: off the plane");
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                assert!((b - a).cross(q - a).dot(normal) >= -1e-9 * normal.length_squared(), "case {case}: outside");
+            }
+        }
+        // A unit square in z = 0 cut into patches: 3 above a point inside it, 5 from a point
+        // 3 above and 4 beside its edge.
+        let square =
+            [[DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0)], [DVec3::ZERO, DVec3::new(1.0, 1.0, 0.0), DVec3::Y]];
+        let patches = tessellate(&scene_of(vec![surface(&square, false)], vec![]), 0.3).unwrap();
+        assert!(patches.patches.len() > 8);
+        let near = |p: DVec3| nearest_patch_distance(&patches, p).unwrap();
+        assert!((near(DVec3::new(0.37, 0.61, 3.0)) - 3.0).abs() < 1e-12);
+        assert!((near(DVec3::new(5.0, 0.5, 3.0)) - 5.0).abs() < 1e-12);
+        assert_eq!(nearest_patch_distance(&Patches::default(), DVec3::ZERO), None);
+    }
 
     /// A scene made of the given surfaces and lights, with one diffuse material.
     pub(crate) fn scene_of(surfaces: Vec<Surface>, lights: Vec<Light>) -> Scene {

@@ -42,6 +42,15 @@ pub fn camera_supersample(width: u32, height: u32) -> u32 {
 pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
+/// The near distance of every pinhole view (a camera, a face of a light sample's window) as a
+/// share of the scene's radius: 2^-20, sixteen of the last places of the single-precision
+/// positions (relative to the scene's centre) that the GPU works in, so that a surface is cut
+/// off only where it could not be told from the eye anyway. With reversed z in a 32-bit float
+/// depth the near distance costs no precision further away (the depth near / z keeps its
+/// relative precision), so a larger one gains nothing; a camera used to cut off what lay
+/// within 1e-5 radii, a metre of a scene 100 km across.
+pub const NEAR_OF_RADIUS: f64 = 1.0 / 1_048_576.0;
+
 /// The uniform for `camera`, with the sample at `jitter` inside each pixel. `near` bounds
 /// the reversed-z projection; with a 32-bit float depth it costs no precision further away.
 pub fn gpu_camera(camera: &Camera, width: u32, height: u32, near: f64, jitter: [f32; 2]) -> GpuCamera {
