@@ -154,3 +154,50 @@ material = "white"
     let (_, notes) = render(0.01);
     assert!(notes.iter().any(|n| n.contains("camera \"camera\"") && n.contains("nearer than")), "{notes:?}");
 }
+
+/// Light transport has no length scale: the same scene in units 2^k times smaller (every
+/// length times 2^k, a point light's power times 4^k) is the same image, and with powers of two
+/// the same to the bit. That holds across the sizes the loader accepts
+/// (`scene::EXTENT_RANGE`); beyond them f32 products of lengths overflow or vanish, and the
+/// loader refuses the scene, naming the range and the fix, instead of rendering it black or
+/// with NaN pixels (a glowing quad 1e30 across did, 2026-11-30).
+#[test]
+fn test04_a_scene_in_other_units_is_the_same_image_or_refused() {
+    let text = std::fs::read_to_string(common::scenes::shipped("cornell_point")).unwrap();
+    let dir = Scratch::new("hostile", "units");
+    let load = |factor: f64| {
+        let path = dir.join(format!("scene_{}.toml", factor.log2()));
+        std::fs::write(&path, common::scenes::scaled(&text, factor)).unwrap();
+        scene::load(&path)
+    };
+    let message = |factor: f64| load(factor).map(|_| ()).unwrap_err().to_string();
+    // cornell_point's radius is about 500: 2^-34 of it is 2.9e-8, 2^25 1.7e10.
+    for factor in [2f64.powi(-34), 2f64.powi(25)] {
+        let e = message(factor);
+        assert!(e.contains("shapes, lights") && e.contains("radius 1e-7 to 1e10") && e.contains("power"), "{e}");
+    }
+    let far = text.replace("position = [278.0, 273.0, -800.0]", "position = [278.0, 273.0, -2e10]");
+    assert_ne!(far, text, "the test's camera line");
+    std::fs::write(dir.join("far.toml"), &far).unwrap();
+    let e = scene::load(&dir.join("far.toml")).map(|_| ()).unwrap_err().to_string();
+    assert!(e.contains("camera.position") && e.contains("1e10"), "{e}");
+
+    let Some(ctx) = common::gpu() else { return };
+    let render = |factor: f64| {
+        let scene = load(factor).unwrap();
+        let mut options = firstshot::render::RenderOptions::from_scene(&scene);
+        (options.width, options.height, options.iterations, options.direct_passes) = (32, 32, 4, 2);
+        (options.hemicube_resolution, options.bundle_resolution, options.shadow_resolution) =
+            (Some(64), Some(64), Some(128));
+        let patches = scene::tessellate(&scene, options.patch_size).unwrap();
+        firstshot::render::render(&ctx, &scene, &patches, &options).unwrap().image
+    };
+    let reference = render(1.0);
+    assert!(reference.mean()[0] > 0.0);
+    // Near both ends of the range: radius 1.2e-7, and 4.2e9 with the camera 9e9 from it.
+    for k in [-22, 23] {
+        let image = render(2f64.powi(k));
+        let error = firstshot::image::image_error(&image, &reference).unwrap();
+        assert!(error.relative_rmse < 1e-6, "in units 2^{k} smaller: {:.2e} off", error.relative_rmse);
+    }
+}

@@ -132,6 +132,7 @@ pub fn load_scene(path: &Path) -> Result<Scene> {
         file_origin: DVec3::ZERO,
     };
     scene.recentre();
+    scene.check_extent()?;
     Ok(scene)
 }
 

@@ -130,6 +130,7 @@ pub fn load_str(text: &str, source: &Path) -> Result<Scene> {
         file_origin: DVec3::ZERO,
     };
     scene.recentre();
+    scene.check_extent()?;
     Ok(scene)
 }
 

@@ -55,6 +55,18 @@ pub struct Scene {
 /// file is moved to it (`Scene::recentre`).
 pub const RECENTRE_RADII: f64 = 4.0;
 
+/// The sizes of scene the GPU's f32 arithmetic renders: the radius of the bounding sphere of
+/// the surfaces and lights (after `Scene::recentre`), and the distance of every camera from
+/// its centre, in scene units (`Scene::check_extent`). The kernels multiply up to three or
+/// four lengths (areas, squared distances, cosines to the third over distances), which
+/// overflow f32 (2^128) beyond a radius of about 2^42 and fall below its normal range (2^-126)
+/// under about 2^-31. Measured (2026-11-30): cornell_point and the Sierpinski scene scaled by
+/// powers of two (a point light's power by the square) render the same image to the bit from
+/// radius 2^-28 to 2^42; at 2^-38 and 2^49 their errors against it were 0.27-0.48, and a
+/// glowing quad of radius 7e-17 came out black and one of 7e20 with NaN pixels. These bounds
+/// keep a margin of 16 to 64 times inside what was measured.
+pub const EXTENT_RANGE: (f64, f64) = (1e-7, 1e10);
+
 /// A pinhole camera (right-handed; image right = normalize(forward x up)).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
@@ -100,6 +112,54 @@ impl Scene {
         // which is far below it, so subtracting a multiple of it is exact in f64.
         let grid = 2f64.powi(radius.log2().floor() as i32);
         self.translate(-(centre / grid).round() * grid);
+    }
+
+    /// Refuses a scene too large or too small for the GPU's f32 arithmetic (`EXTENT_RANGE`),
+    /// which would otherwise render black or with NaN pixels, naming the fix: the same scene
+    /// in other units (every position and size times a factor, a point or spot light's power
+    /// or intensity times its square) renders the same image.
+    pub fn check_extent(&self) -> crate::Result<()> {
+        let (low, high) = EXTENT_RANGE;
+        let surfaces = self.surfaces.iter().flat_map(|s| &s.triangles).flat_map(|t| t.vertices);
+        let Some((lo, hi)) = bounding_box(surfaces.chain(self.lights.iter().flat_map(|l| l.points().iter().copied())))
+        else {
+            return Ok(());
+        };
+        let centre = 0.5 * (lo + hi);
+        let radius = 0.5 * (hi - lo).length();
+        let rescale = "multiply every position and size in the scene (and its meshes) by a factor that brings it \
+                       into that range, a point or spot light's power or intensity by the factor's square: the image \
+                       stays the same";
+        if !(low..=high).contains(&radius) && radius > 0.0 {
+            return Err(crate::Error::scene(
+                &self.source,
+                "shapes, lights",
+                format!(
+                    "they fit in a sphere of radius {radius:.3e} units; the renderer's f32 arithmetic holds scenes of \
+                     radius {low:e} to {high:e} units (beyond, products of lengths overflow or vanish and the image \
+                     comes out black or with NaN pixels): {rescale}"
+                ),
+            ));
+        }
+        for view in &self.cameras {
+            let distance = view.camera.position.distance(centre);
+            if distance > high {
+                let key = if view.name == "camera" {
+                    "camera.position".to_string()
+                } else {
+                    format!("cameras \"{}\" position", view.name)
+                };
+                return Err(crate::Error::scene(
+                    &self.source,
+                    key,
+                    format!(
+                        "the camera is {distance:.3e} units from the scene's centre, beyond the {high:e} that the \
+                         renderer's f32 arithmetic holds: move it nearer, or {rescale}"
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Moves everything with a position (surfaces, lights, cameras) by `by`; `file_origin`

@@ -153,3 +153,45 @@ pub fn moved(text: &str, offset: glam::DVec3) -> String {
         .collect::<Vec<_>>()
         .join("\n")
 }
+
+/// `text` (a scene of quads, boxes, Sierpinski shapes and point, spot or area lights, no
+/// meshes) in units `factor` times smaller: every position and length times `factor`, a
+/// point light's power and a spot's intensity times its square, so that every irradiance and
+/// radiance, and so the image, stays the same.
+pub fn scaled(text: &str, factor: f64) -> String {
+    let times = |value: &str, by: f64| -> String {
+        let mut out = String::new();
+        let mut number = String::new();
+        let flush = |number: &mut String, out: &mut String| {
+            if !number.is_empty() {
+                let x: f64 = number.parse().expect("a number");
+                *out += &format!("{:e}", x * by);
+                number.clear();
+            }
+        };
+        for c in value.chars() {
+            if c.is_ascii_digit() || matches!(c, '.' | '-' | '+' | 'e' | 'E') {
+                number.push(c);
+            } else {
+                flush(&mut number, &mut out);
+                out.push(c);
+            }
+        }
+        flush(&mut number, &mut out);
+        out
+    };
+    text.lines()
+        .map(|line| {
+            let Some((key, value)) = line.split_once(" = ") else { return line.to_string() };
+            let (value, comment) = value.split_once('#').map_or((value, ""), |(v, c)| (v, c));
+            let by = match key {
+                "position" | "look_at" | "vertices" | "center" | "min" | "max" | "size" | "patch_size" => factor,
+                "power" | "intensity" => factor * factor,
+                _ => return line.to_string(),
+            };
+            let comment = if comment.is_empty() { String::new() } else { format!("#{comment}") };
+            format!("{key} = {}{comment}", times(value, by))
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
