@@ -77,7 +77,7 @@ if [ -n "${FIRSTSHOT_GPU_TESTS:-}" ]; then
     # Not those that need what a bare GPU machine lacks: Mitsuba (.whl is not carried with
     # them), Slurm, the Kubernetes schema, an X display, Debian's glTF models; nor the
     # naga-only and host-only ones.
-    skip=" mitsuba slurm kubernetes viewer gltf harness_pure wgsl_validate kernel_bindings scene_load "
+    skip=" mitsuba slurm kubernetes viewer gltf harness_pure wgsl_validate kernel_bindings scene_load docs "
     want=" ${FIRSTSHOT_GPU_TESTS} "
     mkdir -p .gpu/tests && rm -f .gpu/tests/*.gz
     # The library's unit-test binary and the command line's share the crate's name: the
