@@ -341,6 +341,12 @@ fn test04_refusals_name_the_file_and_the_gltf_object() {
     let mut lines = one_triangle(lit);
     lines.meshes[0]["primitives"][0]["mode"] = json!(1);
     refused(load_written(&dir, "lines.gltf", &lines.gltf_embedded()), "meshes", "no triangles");
+    // A model too large for f32 (scene::EXTENT_RANGE): a triangle 1e12 across.
+    let mut huge = GltfWriter::default();
+    let m = huge.material(json!({"emissiveFactor": [1.0, 1.0, 1.0]}));
+    let mesh = huge.mesh(&[[0.0, 0.0, 0.0], [1e12, 0.0, 0.0], [0.0, 1e12, 0.0]], None, Some(m));
+    huge.node(json!({"mesh": mesh}), true);
+    refused(load_written(&dir, "huge.gltf", &huge.gltf_embedded()), "meshes, lights", "radius 1e-7 to 1e10");
 }
 
 #[test]

@@ -131,9 +131,13 @@ impl Scene {
                        into that range, a point or spot light's power or intensity by the factor's square: the image \
                        stays the same";
         if !(low..=high).contains(&radius) && radius > 0.0 {
+            let gltf = self
+                .source
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb"));
             return Err(crate::Error::scene(
                 &self.source,
-                "shapes, lights",
+                if gltf { "meshes, lights" } else { "shapes, lights" },
                 format!(
                     "they fit in a sphere of radius {radius:.3e} units; the renderer's f32 arithmetic holds scenes of \
                      radius {low:e} to {high:e} units (beyond, products of lengths overflow or vanish and the image \
