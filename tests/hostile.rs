@@ -105,28 +105,12 @@ fn test03_a_surface_near_the_camera_in_a_large_scene_is_seen_or_named() {
     }
     let render = |distance: f64| {
         let dir = Scratch::new("hostile", &format!("near-{}", (distance * 1000.0) as u32));
+        let camera = HEAD.replace("position = [0.5, 0.5, 3.0]", &format!("position = [0.5, 0.5, {distance}]"));
+        assert_ne!(camera, HEAD);
         let text = format!(
-            r#"format = 1
-[camera]
-position = [0.5, 0.5, {distance}]
-look_at = [0.5, 0.5, 0.0]
-up = [0.0, 1.0, 0.0]
-fov_y = 40.0
-width = 16
-height = 16
-[materials.white]
-type = "diffuse"
-albedo = [0.5, 0.5, 0.5]
-[[shapes]]
-type = "quad"
-vertices = [[0,0,0],[1,0,0],[1,1,0],[0,1,0]]
-material = "white"
-emission = [1,1,1]
-[[shapes]]
-type = "quad"
-vertices = [[0,0,-1e5],[0,1,-1e5],[1,1,-1e5],[1,0,-1e5]]
-material = "white"
-"#
+            "{camera}[[shapes]]\ntype = \"quad\"\nvertices = [[0,0,0],[1,0,0],[1,1,0],[0,1,0]]\nmaterial = \"white\"\n\
+             emission = [1,1,1]\n[[shapes]]\ntype = \"quad\"\nvertices = [[0,0,-1e5],[0,1,-1e5],[1,1,-1e5],[1,0,-1e5]]\n\
+             material = \"white\"\n"
         );
         let path = dir.join("scene.toml");
         std::fs::write(&path, text).unwrap();
@@ -145,7 +129,7 @@ material = "white"
             stats["notes"].as_array().unwrap().iter().map(|n| n.as_str().unwrap().to_string()).collect();
         (firstshot::image::Image::read_exr(&exr).unwrap().mean()[0], notes)
     };
-    // The square fills the view (tan 20 degrees * 0.1 < 0.5), so every pixel sees its
+    // The square fills the view (tan 25 degrees * 0.1 < 0.5), so every pixel sees its
     // emission: 1, plus nothing it could reflect.
     let (seen, notes) = render(0.1);
     assert!((seen - 1.0).abs() < 1e-3, "mean {seen}, expected the square's emission 1");
