@@ -97,14 +97,9 @@ impl Scene {
     /// radii: nearer, f32 holds positions to within a few 1e-7 of the scene's size already,
     /// and scenes modelled around their origin keep their exact numbers.
     pub fn recentre(&mut self) {
-        let surfaces = self.surfaces.iter().flat_map(|s| &s.triangles).flat_map(|t| t.vertices);
-        let Some((low, high)) =
-            bounding_box(surfaces.chain(self.lights.iter().flat_map(|l| l.points().iter().copied())))
-        else {
+        let Some((centre, radius)) = self.extent() else {
             return;
         };
-        let centre = 0.5 * (low + high);
-        let radius = 0.5 * (high - low).length();
         if !(radius > 0.0 && radius.is_finite() && centre.length() > RECENTRE_RADII * radius) {
             return;
         }
@@ -114,19 +109,23 @@ impl Scene {
         self.translate(-(centre / grid).round() * grid);
     }
 
+    /// The centre and radius of the sphere around the bounding box of the surfaces and the
+    /// lights' points; `None` with neither.
+    fn extent(&self) -> Option<(DVec3, f64)> {
+        let surfaces = self.surfaces.iter().flat_map(|s| &s.triangles).flat_map(|t| t.vertices);
+        let (low, high) = bounding_box(surfaces.chain(self.lights.iter().flat_map(|l| l.points().iter().copied())))?;
+        Some((0.5 * (low + high), 0.5 * (high - low).length()))
+    }
+
     /// Refuses a scene too large or too small for the GPU's f32 arithmetic (`EXTENT_RANGE`),
     /// which would otherwise render black or with NaN pixels, naming the fix: the same scene
     /// in other units (every position and size times a factor, a point or spot light's power
     /// or intensity times its square) renders the same image.
     pub fn check_extent(&self) -> crate::Result<()> {
         let (low, high) = EXTENT_RANGE;
-        let surfaces = self.surfaces.iter().flat_map(|s| &s.triangles).flat_map(|t| t.vertices);
-        let Some((lo, hi)) = bounding_box(surfaces.chain(self.lights.iter().flat_map(|l| l.points().iter().copied())))
-        else {
+        let Some((centre, radius)) = self.extent() else {
             return Ok(());
         };
-        let centre = 0.5 * (lo + hi);
-        let radius = 0.5 * (hi - lo).length();
         let rescale = "multiply every position and size in the scene (and its meshes) by a factor that brings it \
                        into that range, a point or spot light's power or intensity by the factor's square: the image \
                        stays the same";
