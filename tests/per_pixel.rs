@@ -1070,10 +1070,14 @@ fn test20_a_supersampled_camera_item_buffer_sees_what_a_raster_per_step_sees() {
     // of 2 304 pixels differ on Sierpinski (relative RMS difference 4.8e-3) and 9-16 on the
     // Cornell box's views (1.0e-4 to 1.5e-3); on an NVIDIA H200 (driver 580.159.04) 110
     // (5.0e-3) and 92-150 (2.3e-4 to 2.4e-3), a share of 6.5 % at most, each render the same
-    // to the bit when repeated. A wrong stratum (x and y swapped, checked by breaking it)
-    // moves the sample by up to three quarters of a pixel, across patch edges too: 1 905-2 188
-    // pixels (83-95 %) then differ, by 2.7e-2 to 8.1e-2. The bounds (a quarter of the pixels,
-    // RMS 1e-2) sit between the two on both drivers.
+    // to the bit when repeated. Which pixels differ, and by how much, depends on the blocks'
+    // offsets: over seeds 1-6 on lavapipe, 56-80 pixels (2.4-3.5 %) with relative RMS 4.9e-3
+    // to 1.1e-2 with the random offsets of before 2026-11-30, 58-80 with 6.5e-3 to 1.8e-2 with
+    // the Sobol offsets since (`rng::stratified_pixel_sample`). A wrong stratum (x and y
+    // swapped, checked by breaking it) moves the sample by up to three quarters of a pixel,
+    // across patch edges too: 1 905-2 188 pixels (83-95 %) then differ, by 2.7e-2 to 8.1e-2
+    // (seeds 1-6 with the Sobol offsets: 2 037-2 082 pixels, 5.7e-2 to 8.1e-2). The bounds (a
+    // quarter of the pixels, RMS 3e-2) sit between the two on both drivers.
     let Some(ctx) = common::gpu() else { return };
     let scenes = [
         (common::scenes::shipped("sierpinski"), false),
@@ -1127,7 +1131,7 @@ fn test20_a_supersampled_camera_item_buffer_sees_what_a_raster_per_step_sees() {
             let rms = (d2 / b2).sqrt();
             assert!(a.mean()[0] > 0.01, "the image is lit");
             assert!(
-                share < 0.25 && rms < 1e-2,
+                share < 0.25 && rms < 3e-2,
                 "{}: view {v}: {differ} pixels differ ({share:.4}), rms {rms:.2e}",
                 path.display()
             );
@@ -1240,7 +1244,9 @@ fn test24_the_whole_pipeline_far_from_the_origin_renders_what_it_renders_at_it()
     // there: the camera's rays, the bundles' depths, the first shot's and the shadow rays'.
     // Before the loader moved such a scene to its own origin (`Scene::recentre`), its image
     // (64 x 64, 8 steps) was 0.140 from the one at the origin by the relative RMSE below (7.3 %
-    // by `firstshot compare`); now 0.0003, rounding.
+    // by `firstshot compare`); now rounding alone, which moves a bright pixel's sample across
+    // an edge now and then: over seeds 1-8, 0.00000 to 0.00318 (0.0030 at seed 1 since the
+    // camera samples' Sobol offsets, 0.0003 before). The bound, 0.01, sits between the two.
     let Some(ctx) = common::gpu() else { return };
     let text = std::fs::read_to_string(common::scenes::shipped("sierpinski")).unwrap();
     let by = DVec3::new(1.0e5, 0.0, -1.0e5);
@@ -1260,7 +1266,7 @@ fn test24_the_whole_pipeline_far_from_the_origin_renders_what_it_renders_at_it()
     let difference = common::difference(&moved.image, &at_origin.image);
     let (rmse, ratio) = (difference.relative_rmse, difference.ratio_of_means);
     eprintln!("moved ({}) from the origin: relative RMSE {rmse:.5}, ratio of means {ratio:.5}", by);
-    assert!(rmse < 0.003 && (ratio - 1.0).abs() < 0.001, "relative RMSE {rmse}, ratio of means {ratio}");
+    assert!(rmse < 0.01 && (ratio - 1.0).abs() < 0.001, "relative RMSE {rmse}, ratio of means {ratio}");
 }
 
 #[test]
