@@ -236,15 +236,35 @@ fn halves(word: u32) -> vec2<f32> {
     return select(normal, small, exponent == vec2<u32>(0u));
 }
 
-// The span (entry, exit) of the line origin + t dir (in the tree's frame, inv = 1 / dir) within
-// node `node`'s box: empty where entry > exit.
-fn node_span(node: u32, origin: vec3<f32>, inv: vec3<f32>) -> vec2<f32> {
+// The segment y + t dir (t in [0, 1]) in the BVH's frame, as its box tests take it: the
+// start moved and scaled into the frame, and 1 / the scaled direction (a tiny component kept
+// off zero).
+struct FrameRay {
+    origin: vec3<f32>,
+    inv: vec3<f32>,
+}
+
+fn frame_ray(y: vec3<f32>, dir: vec3<f32>) -> FrameRay {
+    let origin = (y - vec3<f32>(SHADOW_FRAME_X, SHADOW_FRAME_Y, SHADOW_FRAME_Z)) * SHADOW_FRAME_SCALE;
+    let scaled = dir * SHADOW_FRAME_SCALE;
+    return FrameRay(origin, 1.0 / select(scaled, vec3<f32>(1e-30), abs(scaled) < vec3<f32>(1e-30)));
+}
+
+// The first and last triangle (indices into shadow_triangles) of the leaf whose link is `link`.
+fn leaf_triangles(link: u32) -> vec2<u32> {
+    let first = (link & ~SHADOW_LEAF) >> SHADOW_LEAF_COUNT_BITS;
+    return vec2<u32>(first, first + (link & ((1u << SHADOW_LEAF_COUNT_BITS) - 1u)));
+}
+
+// The span (entry, exit) of `ray` (in the tree's frame) within node `node`'s box: empty where
+// entry > exit.
+fn node_span(node: u32, ray: FrameRay) -> vec2<f32> {
     let bounds = shadow_nodes[node].bounds;
     let a = halves(bounds.x);
     let b = halves(bounds.y);
     let c = halves(bounds.z);
-    let t0 = (vec3<f32>(a, b.x) - origin) * inv;
-    let t1 = (vec3<f32>(b.y, c) - origin) * inv;
+    let t0 = (vec3<f32>(a, b.x) - ray.origin) * ray.inv;
+    let t1 = (vec3<f32>(b.y, c) - ray.origin) * ray.inv;
     let lo = min(t0, t1);
     let hi = max(t0, t1);
     return vec2<f32>(max(max(lo.x, lo.y), lo.z), min(min(hi.x, hi.y), hi.z));
@@ -262,13 +282,11 @@ fn occluded(light_point: vec3<f32>, n_y: vec3<f32>, surface_point: vec3<f32>, n_
     let y = lifted(light_point, n_y, surface_point);
     let x = lifted(surface_point, n_x, light_point);
     let dir = x - y;
-    let origin = (y - vec3<f32>(SHADOW_FRAME_X, SHADOW_FRAME_Y, SHADOW_FRAME_Z)) * SHADOW_FRAME_SCALE;
-    let scaled = dir * SHADOW_FRAME_SCALE;
-    let inv = 1.0 / select(scaled, vec3<f32>(1e-30), abs(scaled) < vec3<f32>(1e-30));
+    let ray = frame_ray(y, dir);
     let end = arrayLength(&shadow_nodes);
     var node = 0u;
     while (node < end) {
-        let span = node_span(node, origin, inv);
+        let span = node_span(node, ray);
         let near = max(span.x, SEGMENT_EPSILON);
         let far = min(span.y, 1.0 - SEGMENT_EPSILON);
         let link = shadow_nodes[node].link;
@@ -278,9 +296,8 @@ fn occluded(light_point: vec3<f32>, n_y: vec3<f32>, surface_point: vec3<f32>, n_
                 node++;
                 continue;
             }
-            let first = (link & ~SHADOW_LEAF) >> SHADOW_LEAF_COUNT_BITS;
-            let last = first + (link & ((1u << SHADOW_LEAF_COUNT_BITS) - 1u));
-            for (var k = first; k <= last; k++) {
+            let leaf_range = leaf_triangles(link);
+            for (var k = leaf_range.x; k <= leaf_range.y; k++) {
                 if (shadow_triangle_hit(k, y, dir)) {
                     return true;
                 }
@@ -306,15 +323,13 @@ struct Hit {
 fn nearest_hit(x: vec3<f32>, n: vec3<f32>, toward: vec3<f32>) -> Hit {
     let y = lifted(x, n, x + toward);
     let dir = toward * SKY_REACH;
-    let origin = (y - vec3<f32>(SHADOW_FRAME_X, SHADOW_FRAME_Y, SHADOW_FRAME_Z)) * SHADOW_FRAME_SCALE;
-    let scaled = dir * SHADOW_FRAME_SCALE;
-    let inv = 1.0 / select(scaled, vec3<f32>(1e-30), abs(scaled) < vec3<f32>(1e-30));
+    let ray = frame_ray(y, dir);
     var best = Hit(NO_HIT, 0.0, 0.0);
     var nearest = 1.0;
     let end = arrayLength(&shadow_nodes);
     var node = 0u;
     while (node < end) {
-        let span = node_span(node, origin, inv);
+        let span = node_span(node, ray);
         let near = max(span.x, SEGMENT_EPSILON);
         let far = min(span.y, nearest);
         let link = shadow_nodes[node].link;
@@ -324,9 +339,8 @@ fn nearest_hit(x: vec3<f32>, n: vec3<f32>, toward: vec3<f32>) -> Hit {
                 node++;
                 continue;
             }
-            let first = (link & ~SHADOW_LEAF) >> SHADOW_LEAF_COUNT_BITS;
-            let last = first + (link & ((1u << SHADOW_LEAF_COUNT_BITS) - 1u));
-            for (var k = first; k <= last; k++) {
+            let leaf_range = leaf_triangles(link);
+            for (var k = leaf_range.x; k <= leaf_range.y; k++) {
                 let h = triangle_crossing(shadow_triangles[k].v0, shadow_triangles[k].e1, shadow_triangles[k].e2, y, dir);
                 if (h.x > SEGMENT_EPSILON && h.x < nearest) {
                     nearest = h.x;
